@@ -1,0 +1,1 @@
+"""Speed and quality measurements. Each script records its figures with ``benchmarks.results``."""

@@ -1,0 +1,64 @@
+"""The results table: every number in the README's table comes from a benchmark through here.
+
+``record(...)`` stores one figure in ``benchmarks/results.json`` (atomically, keyed by
+``section/name``) together with the command that produced it; ``render_readme()`` rewrites the
+README between the ``<!-- results:start -->`` and ``<!-- results:end -->`` markers.
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+import time
+from pathlib import Path
+
+from coursekit.io import atomic_write_text
+
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "benchmarks" / "results.json"
+README = ROOT / "README.md"
+START, END = "<!-- results:start -->", "<!-- results:end -->"
+
+
+def load() -> dict:
+    if not RESULTS.exists():
+        return {}
+    return json.loads(RESULTS.read_text())
+
+
+def record(section: str, name: str, value: float | str, unit: str, command: str,
+           target: str = "", note: str = "") -> None:
+    """Store one measured figure (and re-render the README table)."""
+    table = load()
+    table[f"{section}/{name}"] = {
+        "section": section, "name": name, "value": value, "unit": unit, "target": target,
+        "command": command, "note": note, "measured": time.strftime("%Y-%m-%d"),
+        "machine": f"{platform.machine()}, {__import__('os').cpu_count()} cores",
+    }
+    atomic_write_text(RESULTS, json.dumps(table, indent=1, sort_keys=True) + "\n")
+    render_readme()
+
+
+def _fmt(v: float | str) -> str:
+    if isinstance(v, float):
+        return f"{v:.3g}" if abs(v) < 1000 else f"{v:,.0f}"
+    return str(v)
+
+
+def render_table() -> str:
+    rows = ["| section | figure | value | target | command |", "|---|---|---|---|---|"]
+    for entry in sorted(load().values(), key=lambda e: (e["section"], e["name"])):
+        val = f"{_fmt(entry['value'])} {entry['unit']}".strip()
+        rows.append(f"| {entry['section']} | {entry['name']} | {val} | {entry['target']} | `{entry['command']}` |")
+    return "\n".join(rows)
+
+
+def render_readme() -> None:
+    if not README.exists():
+        return
+    text = README.read_text()
+    if START not in text or END not in text:
+        return
+    head, rest = text.split(START, 1)
+    _, tail = rest.split(END, 1)
+    atomic_write_text(README, f"{head}{START}\n{render_table()}\n{END}{tail}")

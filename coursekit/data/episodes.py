@@ -1,0 +1,150 @@
+"""Demonstrations on disk: flat per-step arrays plus episode ends, with metadata.
+
+Format (one ``.npz`` file, written atomically, read without pickle)::
+
+    <key>         (N, ...)  every per-step array, episodes concatenated in order
+                            (e.g. "obs" (N, Do), "action" (N, Da), "state" (N, Ds))
+    episode_ends  (E,)      int64, exclusive end index of each episode: episode e is
+                            rows episode_ends[e-1] : episode_ends[e]
+    __meta__      ()        JSON text: format version, env id, obs type, expert, seed, ...
+
+This is the flat layout of Diffusion Policy's replay buffer, without Zarr. The zip container
+checksums every member, so a truncated or corrupt file is refused on load with a clear error.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from coursekit.io import atomic_path
+
+FORMAT_VERSION = 1
+_META_KEY = "__meta__"
+_ENDS_KEY = "episode_ends"
+
+
+class DatasetError(ValueError):
+    """A dataset file that is missing, truncated, corrupt or inconsistent."""
+
+
+@dataclass
+class EpisodeDataset:
+    """Per-step arrays of many episodes, concatenated, plus where each episode ends.
+
+    Attributes:
+        arrays: name -> array of shape (N, ...), N = total steps over all episodes.
+        episode_ends: (E,) int64, exclusive end of each episode, strictly increasing, last == N.
+        meta: JSON-serialisable metadata (env_id, obs_type, expert, seed, version, ...).
+    """
+
+    arrays: dict[str, np.ndarray]
+    episode_ends: np.ndarray
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.episode_ends = np.asarray(self.episode_ends, dtype=np.int64)
+        ends = self.episode_ends
+        if ends.ndim != 1:
+            raise DatasetError(f"episode_ends must be 1-d, got shape {ends.shape}")
+        if len(ends) and (ends[0] <= 0 or np.any(np.diff(ends) <= 0)):
+            raise DatasetError(f"episode_ends must be strictly increasing and positive, got {ends[:10]}...")
+        n = int(ends[-1]) if len(ends) else 0
+        for key, arr in self.arrays.items():
+            if key in (_META_KEY, _ENDS_KEY):
+                raise DatasetError(f"array name {key!r} is reserved")
+            if arr.shape[:1] != (n,):
+                raise DatasetError(f"array {key!r} has {arr.shape[0] if arr.ndim else 0} rows, episode_ends says {n}")
+
+    # ---- construction -------------------------------------------------------------------
+    @classmethod
+    def from_episodes(cls, episodes: list[dict[str, np.ndarray]], meta: dict[str, Any] | None = None) -> EpisodeDataset:
+        """Concatenate a list of episodes (each: name -> (T_e, ...) array, same names in all)."""
+        if not episodes:
+            raise DatasetError("from_episodes needs at least one episode, got an empty list")
+        keys = sorted(episodes[0])
+        for i, ep in enumerate(episodes):
+            if sorted(ep) != keys:
+                raise DatasetError(f"episode {i} has arrays {sorted(ep)}, episode 0 has {keys}")
+        lengths = [len(ep[keys[0]]) for ep in episodes]
+        arrays = {k: np.concatenate([np.asarray(ep[k]) for ep in episodes], axis=0) for k in keys}
+        return cls(arrays=arrays, episode_ends=np.cumsum(lengths), meta=dict(meta or {}))
+
+    # ---- access -------------------------------------------------------------------------
+    @property
+    def n_episodes(self) -> int:
+        return len(self.episode_ends)
+
+    @property
+    def n_steps(self) -> int:
+        return int(self.episode_ends[-1]) if len(self.episode_ends) else 0
+
+    @property
+    def episode_starts(self) -> np.ndarray:
+        """(E,) int64, inclusive start index of each episode."""
+        return np.concatenate([[0], self.episode_ends[:-1]]).astype(np.int64)
+
+    @property
+    def episode_lengths(self) -> np.ndarray:
+        """(E,) int64 steps per episode."""
+        return np.diff(np.concatenate([[0], self.episode_ends])).astype(np.int64)
+
+    def episode(self, index: int) -> dict[str, np.ndarray]:
+        """The arrays of one episode, each (T_e, ...)."""
+        if not -self.n_episodes <= index < self.n_episodes:
+            raise IndexError(f"episode index {index} out of range for {self.n_episodes} episodes")
+        index %= self.n_episodes
+        start, end = int(self.episode_starts[index]), int(self.episode_ends[index])
+        return {k: v[start:end] for k, v in self.arrays.items()}
+
+    def __getitem__(self, key: str) -> np.ndarray:
+        return self.arrays[key]
+
+    def __repr__(self) -> str:
+        shapes = ", ".join(f"{k}{tuple(v.shape)}" for k, v in self.arrays.items())
+        return f"EpisodeDataset({self.n_episodes} episodes, {self.n_steps} steps: {shapes}; env={self.meta.get('env_id')})"
+
+    # ---- disk ---------------------------------------------------------------------------
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write atomically to ``path`` (``.npz``); an existing file is replaced only on success."""
+        path = Path(path)
+        meta = {"format_version": FORMAT_VERSION, **self.meta}
+        payload = {k: np.ascontiguousarray(v) for k, v in self.arrays.items()}
+        payload[_ENDS_KEY] = self.episode_ends
+        payload[_META_KEY] = np.array(json.dumps(meta, sort_keys=True))
+        with atomic_path(path) as tmp:
+            with open(tmp, "wb") as fh:  # a file handle: np.savez must not append ".npz"
+                np.savez_compressed(fh, **payload)
+        return path
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> EpisodeDataset:
+        """Read a dataset written by :meth:`save`; refuse missing, truncated or corrupt files."""
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"dataset file not found: {str(path)!r} (make one with `coursekit collect ...`)")
+        try:
+            with np.load(path, allow_pickle=False) as npz:
+                names = set(npz.files)
+                if _META_KEY not in names or _ENDS_KEY not in names:
+                    raise DatasetError(
+                        f"{str(path)!r} is not a coursekit dataset: it lacks {_META_KEY!r}/{_ENDS_KEY!r} "
+                        f"(found {sorted(names)[:8]})"
+                    )
+                meta = json.loads(str(npz[_META_KEY]))
+                ends = npz[_ENDS_KEY]
+                arrays = {k: npz[k] for k in sorted(names - {_META_KEY, _ENDS_KEY})}
+        except DatasetError:
+            raise
+        except (zipfile.BadZipFile, EOFError, OSError, ValueError, KeyError, json.JSONDecodeError) as exc:
+            raise DatasetError(f"dataset file {str(path)!r} is truncated or corrupt ({type(exc).__name__}: {exc})") from exc
+        version = meta.get("format_version")
+        if version != FORMAT_VERSION:
+            raise DatasetError(f"{str(path)!r} has format_version {version!r}; this coursekit reads {FORMAT_VERSION}")
+        return cls(arrays=arrays, episode_ends=ends, meta=meta)
