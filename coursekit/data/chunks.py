@@ -36,6 +36,61 @@ def _check_ends(episode_ends: np.ndarray) -> np.ndarray:
     return ends
 
 
+def sequence_window_indices(episode_ends: np.ndarray, horizon: int, n_obs_steps: int,
+                            n_action_steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """Index table of every Diffusion Policy training window (exercise "chunk_windows", Ch. 1).
+
+    Episode ``e`` owns the flat rows ``[s_e, t_e)`` with ``s_e = episode_ends[e-1]`` (0 for the
+    first episode) and ``t_e = episode_ends[e]``. With To = n_obs_steps, Tp = horizon and
+    Ta = n_action_steps, its windows start at every ``w`` with
+
+        s_e - (To - 1)  <=  w  <=  max(t_e - Tp + (Ta - 1),  s_e - (To - 1))
+
+    (so an episode shorter than a window still yields exactly one), and window ``w`` holds
+
+        indices[w, j] = clip(w + j, s_e, t_e - 1)      for j = 0 .. Tp - 1,
+
+    i.e. steps before the episode repeat its first step and steps after it repeat its last step
+    (edge padding). The padding lets the first executed action, pred[To - 1], be the episode's
+    first action, and the last chunk still run Ta steps. Windows never cross episodes.
+
+    Args:
+        episode_ends: (E,) strictly increasing positive ints, one past each episode's last row.
+        horizon: Tp, steps per window.
+        n_obs_steps: To, observation steps at the start of each window.
+        n_action_steps: Ta, actions executed per chunk; To - 1 + Ta must be <= Tp.
+
+    Returns:
+        indices: (W, Tp) int64 rows into the per-step arrays, episodes in order, w increasing.
+        episode: (W,) int64 episode of each window.
+    """
+    ends = _check_ends(episode_ends)
+    for name, v in (("horizon", horizon), ("n_obs_steps", n_obs_steps), ("n_action_steps", n_action_steps)):
+        if not isinstance(v, (int, np.integer)) or v < 1:
+            raise ValueError(f"{name} must be a positive integer, got {v!r}")
+    if n_obs_steps - 1 + n_action_steps > horizon:
+        raise ValueError(
+            f"To - 1 + Ta must fit in Tp: n_obs_steps={n_obs_steps}, n_action_steps={n_action_steps}, "
+            f"horizon={horizon}"
+        )
+    # BEGIN SOLUTION
+    pad_before, pad_after = n_obs_steps - 1, n_action_steps - 1
+    starts = np.concatenate([[0], ends[:-1]])
+    rows, eps = [], []
+    offsets = np.arange(horizon)
+    for e, (s, t) in enumerate(zip(starts, ends)):
+        # first window starts pad_before steps early, last one ends pad_after steps late
+        first, last = s - pad_before, t - horizon + pad_after
+        window_starts = np.arange(first, max(last, first) + 1)
+        idx = np.clip(window_starts[:, None] + offsets[None, :], s, t - 1)  # (w_e, Tp)
+        rows.append(idx)
+        eps.append(np.full(len(idx), e))
+    indices = np.concatenate(rows).astype(np.int64)  # (W, Tp)
+    episode = np.concatenate(eps).astype(np.int64)  # (W,)
+    # END SOLUTION
+    return indices, episode
+
+
 @dataclass(frozen=True)
 class SequenceWindows:
     """Diffusion Policy windows: index table of shape (n_windows, horizon) into the flat arrays.
@@ -56,28 +111,8 @@ class SequenceWindows:
     def build(cls, episode_ends: np.ndarray, horizon: int = 16, n_obs_steps: int = 2,
               n_action_steps: int = 8) -> SequenceWindows:
         """Every window of Tp steps, padded by To - 1 before and Ta - 1 after each episode."""
-        ends = _check_ends(episode_ends)
-        for name, v in (("horizon", horizon), ("n_obs_steps", n_obs_steps), ("n_action_steps", n_action_steps)):
-            if not isinstance(v, (int, np.integer)) or v < 1:
-                raise ValueError(f"{name} must be a positive integer, got {v!r}")
-        if n_obs_steps - 1 + n_action_steps > horizon:
-            raise ValueError(
-                f"To - 1 + Ta must fit in Tp: n_obs_steps={n_obs_steps}, n_action_steps={n_action_steps}, "
-                f"horizon={horizon}"
-            )
-        pad_before, pad_after = n_obs_steps - 1, n_action_steps - 1
-        starts = np.concatenate([[0], ends[:-1]])
-        rows, eps = [], []
-        offsets = np.arange(horizon)
-        for e, (s, t) in enumerate(zip(starts, ends)):
-            # first window starts pad_before steps early, last one ends pad_after steps late
-            first, last = s - pad_before, t - horizon + pad_after
-            window_starts = np.arange(first, max(last, first) + 1)
-            idx = np.clip(window_starts[:, None] + offsets[None, :], s, t - 1)  # (w_e, Tp)
-            rows.append(idx)
-            eps.append(np.full(len(idx), e))
-        return cls(np.concatenate(rows).astype(np.int64), np.concatenate(eps).astype(np.int64),
-                   int(n_obs_steps), int(horizon))
+        indices, episode = sequence_window_indices(episode_ends, horizon, n_obs_steps, n_action_steps)
+        return cls(indices, episode, int(n_obs_steps), int(horizon))
 
     def __len__(self) -> int:
         return len(self.indices)
