@@ -1,0 +1,73 @@
+"""PushT geometry against closed forms and an independent shapely construction."""
+
+import math
+
+import numpy as np
+import pytest
+import shapely
+from shapely.geometry import MultiPolygon, Polygon
+
+from coursekit.envs import pusht_geometry as geo
+
+
+def test_t_area_and_shapes():
+    crossbar, stem = geo.block_polygons((0.0, 0.0, 0.0))
+    assert crossbar.shape == (4, 2) and stem.shape == (4, 2)
+    assert Polygon(crossbar).area + Polygon(stem).area == pytest.approx(geo.T_AREA)
+    assert geo.t_shape((10.0, 20.0, 0.3)).area == pytest.approx(6300.0)
+    assert geo.block_keypoints(geo.GOAL_POSE).shape == (8, 2)
+
+
+def test_local_to_world_matches_rotation_matrix():
+    pose = (100.0, 50.0, 0.7)
+    pt = np.array([[3.0, -4.0]])
+    c, s = math.cos(0.7), math.sin(0.7)
+    expected = np.array([100 + c * 3 - s * -4, 50 + s * 3 + c * -4])
+    np.testing.assert_allclose(geo.local_to_world(pt, pose)[0], expected)
+
+
+def test_coverage_at_goal_is_one_and_far_away_zero():
+    assert geo.coverage(geo.GOAL_POSE) == pytest.approx(1.0, abs=1e-12)
+    assert geo.coverage((256.0 + 300, 256.0, 0.0)) == 0.0
+
+
+def test_coverage_shift_along_crossbar_closed_form():
+    # Shift the block by d along the goal's own x axis: crossbar overlap (120 - d) * 30,
+    # stem overlap (30 - d) * 90, no cross terms (the bars' y ranges do not overlap).
+    x, y, a = geo.GOAL_POSE
+    for d in (4.0, 10.0, 25.0):
+        pose = (x + d * math.cos(a), y + d * math.sin(a), a)
+        expected = ((120 - d) * 30 + (30 - d) * 90) / 6300
+        assert geo.coverage(pose) == pytest.approx(expected, rel=1e-9)
+
+
+@pytest.mark.parametrize("pose", [(250.0, 260.0, 0.7), (300.0, 200.0, 2.0), (256.0, 256.0, -1.0)])
+def test_coverage_matches_independent_multipolygon(pose):
+    # The reference builds a MultiPolygon of the two boxes; compare with our single outline.
+    def multi(p):
+        return MultiPolygon([Polygon(b) for b in geo.block_polygons(p)])
+
+    goal = multi(geo.GOAL_POSE)
+    expected = shapely.area(shapely.intersection(goal, multi(pose))) / goal.area
+    assert geo.coverage(pose) == pytest.approx(expected, abs=1e-9)
+
+
+def test_reward_clip():
+    assert geo.reward_from_coverage(0.95) == pytest.approx(1.0)
+    assert geo.reward_from_coverage(0.475) == pytest.approx(0.5)
+    assert geo.reward_from_coverage(1.0) == 1.0
+
+
+def test_legacy_pose_rotates_about_cog():
+    # The CoG's world position must be the same as with angle 0 at the requested position.
+    pos, ang = (200.0, 150.0), 1.1
+    pose = geo.legacy_pose(pos, ang)
+    np.testing.assert_allclose(geo.cog_world(pose), geo.cog_world((pos[0], pos[1], 0.0)))
+    assert pose[2] == ang
+
+
+def test_bad_pose_raises():
+    with pytest.raises(ValueError, match="shape"):
+        geo.block_polygons((1.0, 2.0))
+    with pytest.raises(ValueError, match="finite"):
+        geo.coverage((float("nan"), 0.0, 0.0))
