@@ -1,0 +1,42 @@
+"""Exercises and grading: one marked source, generated stubs/solutions, feedback and a safe grader.
+
+- :mod:`coursekit.grading.registry` — the table of exercises (id, chapter, code, points, hints).
+- :mod:`coursekit.grading.build` — writes ``exercises/`` (stubs) and ``solutions/`` from the marked code.
+- :func:`load_exercise` — the student's module (``exercises/`` or, with
+  ``COURSEKIT_EXERCISES=solutions``, ``solutions/``).
+- ``coursekit.check(id)`` (:mod:`coursekit.grading.check`) — runs one exercise's tests in a
+  subprocess and prints a table (notebooks).
+- :mod:`coursekit.grading.grade` — grades a folder of submissions (``coursekit grade``).
+
+Nothing here imports torch or pytest at import time.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+_LAZY = {
+    "EXERCISES": "coursekit.grading.registry:EXERCISES",
+    "Exercise": "coursekit.grading.registry:Exercise",
+    "get_exercise": "coursekit.grading.registry:get_exercise",
+    "load_exercise": "coursekit.grading.loader:load_exercise",
+    "build_exercises": "coursekit.grading.build:build_exercises",
+    "grade_submissions": "coursekit.grading.grade:grade_submissions",
+}
+
+__all__ = sorted(_LAZY)
+
+
+def __getattr__(name: str) -> Any:
+    target = _LAZY.get(name)
+    if target is None:
+        raise AttributeError(f"module 'coursekit.grading' has no attribute {name!r}")
+    module_name, _, obj = target.partition(":")
+    value = getattr(importlib.import_module(module_name), obj)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return __all__

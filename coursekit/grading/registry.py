@@ -1,0 +1,104 @@
+"""The exercise registry: every graded piece of the course, in one table.
+
+An exercise is code written ONCE in the library, inside a module-level function or class,
+between ``# BEGIN SOLUTION`` and ``# END SOLUTION`` lines. ``coursekit exercises build`` turns
+each entry below into ``exercises/<id>.py`` (stubs) and ``solutions/<id>.py`` (complete), and
+``tests/exercises/test_<id>.py`` grades the student's module. Adding an exercise is one
+``Exercise(...)`` entry here plus that one test file (see /dev/EXERCISES_HOWTO.md in the team
+notes, and the instructors' section of the README).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+_ID = re.compile(r"^[a-z][a-z0-9_]*$")
+
+
+@dataclass(frozen=True)
+class Exercise:
+    """One graded exercise: where its code lives and how its tests are scored."""
+
+    id: str
+    """Short snake_case name; the generated files are exercises/<id>.py and solutions/<id>.py."""
+    chapter: int
+    """Notebook chapter; exercises are numbered <chapter>.<k> in registry order."""
+    title: str
+    """One line shown in stubs, check() tables and feedback."""
+    source: str
+    """Dotted library module that holds the marked code, e.g. "coursekit.data.chunks"."""
+    objects: tuple[str, ...]
+    """Module-level functions/classes copied (in this order) into the generated module."""
+    tests: dict[str, tuple[float, str]] = field(default_factory=dict)
+    """Test function name in tests/exercises/test_<id>.py -> (points, one-line hint)."""
+
+    def __post_init__(self) -> None:
+        if not _ID.match(self.id):
+            raise ValueError(f"exercise id must be snake_case, got {self.id!r}")
+        if not isinstance(self.chapter, int) or self.chapter < 0:
+            raise ValueError(f"exercise {self.id!r}: chapter must be a non-negative int, got {self.chapter!r}")
+        if not self.objects or not all(isinstance(o, str) and o.isidentifier() for o in self.objects):
+            raise ValueError(f"exercise {self.id!r}: objects must be identifiers, got {self.objects!r}")
+        if not self.tests:
+            raise ValueError(f"exercise {self.id!r}: needs at least one graded test")
+        for name, spec in self.tests.items():
+            if not name.startswith("test_") or not name.isidentifier():
+                raise ValueError(f"exercise {self.id!r}: test names must look like test_*, got {name!r}")
+            if not (isinstance(spec, tuple) and len(spec) == 2 and spec[0] > 0 and isinstance(spec[1], str) and spec[1]):
+                raise ValueError(f"exercise {self.id!r}: test {name!r} needs (points > 0, hint), got {spec!r}")
+
+    @property
+    def test_module(self) -> str:
+        """Path of the graded test file, relative to the repository root."""
+        return f"tests/exercises/test_{self.id}.py"
+
+    @property
+    def max_points(self) -> float:
+        return float(sum(points for points, _ in self.tests.values()))
+
+
+EXERCISES: tuple[Exercise, ...] = (
+    Exercise(
+        id="chunk_windows",
+        chapter=1,
+        title="Diffusion Policy training windows with edge padding",
+        source="coursekit.data.chunks",
+        objects=("sequence_window_indices",),
+        tests={
+            "test_shapes_and_dtypes": (1, "Return (indices, episode): int64 arrays of shape (W, Tp) and (W,)."),
+            "test_one_episode_matches_definition": (2, "Window w holds clip(w + j, s, t - 1) for j = 0..Tp-1, w from s-(To-1) to t-Tp+(Ta-1)."),
+            "test_edge_padding": (2, "Before the episode repeat its first row, after it repeat its last row (clip, don't wrap)."),
+            "test_windows_stay_in_their_episode": (2, "Clip every window to its own episode [s, t); episode[w] is that episode's index."),
+            "test_window_count": (1, "Each episode of length L gives max(L - Tp + To + Ta - 1, 1) windows."),
+            "test_short_episode_gets_one_window": (1, "An episode shorter than a window still gives exactly one (edge-padded) window."),
+            "test_matches_library_on_random_datasets": (1, "Episodes in order, window starts increasing; compare with SequenceWindows on small cases."),
+        },
+    ),
+)
+
+
+def exercise_number(exercise: Exercise) -> str:
+    """'<chapter>.<k>': k counts the chapter's exercises in registry order, from 1."""
+    same = [e.id for e in EXERCISES if e.chapter == exercise.chapter]
+    k = same.index(exercise.id) + 1 if exercise.id in same else 1
+    return f"{exercise.chapter}.{k}"
+
+
+def get_exercise(exercise_id: str) -> Exercise:
+    """The registered exercise called ``exercise_id`` (ValueError listing the known ids)."""
+    for exercise in EXERCISES:
+        if exercise.id == exercise_id:
+            return exercise
+    known = ", ".join(e.id for e in EXERCISES)
+    raise ValueError(f"unknown exercise {exercise_id!r}; registered exercises: {known}")
+
+
+def _check_unique() -> None:
+    ids = [e.id for e in EXERCISES]
+    duplicates = sorted({i for i in ids if ids.count(i) > 1})
+    if duplicates:
+        raise ValueError(f"duplicate exercise ids in the registry: {duplicates}")
+
+
+_check_unique()
