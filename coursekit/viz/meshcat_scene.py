@@ -1,0 +1,251 @@
+"""One meshcat server per process, owned, framed for the camera and closed cleanly.
+
+meshcat 0.3.2 has no in-process mode: ``meshcat.Visualizer()`` starts a server SUBPROCESS (zmq on
+127.0.0.1:6000+, http on 7000+). meshcat kills it at a normal interpreter exit, but after a
+SIGTERM/SIGKILL of the parent (a killed notebook kernel, a timed-out test) it is orphaned and keeps
+its ports. So this module starts the server itself (same command line as meshcat) and
+
+- kills it in :meth:`MeshcatScene.close` (also registered with ``atexit``, and run by ``with``);
+- asks Linux to SIGKILL it when the parent dies (``prctl(PR_SET_PDEATHSIG)``), so even a SIGKILLed
+  kernel leaves no server behind. Caveat: the signal fires when the *thread* that started the
+  server ends, so create the scene from the main thread (notebooks, scripts and pytest all do).
+
+Everything the course shows is exported with :meth:`MeshcatScene.static_html`: one self-contained
+HTML file (about 0.9 MB; three.js is inlined) with the scene and its animation, which works
+offline and outlives the server. Notebooks never embed the live server.
+
+Coordinates: meshcat is z-up (world). Its default camera lives at ``/Cameras/default/rotated``
+(rotated so that three.js's y-up is world z-up) and orbits the world origin, so each scene centres
+its content on the origin and :meth:`MeshcatScene.set_camera` places the camera in world
+coordinates.
+"""
+
+from __future__ import annotations
+
+import atexit
+import contextlib
+import ctypes
+import io
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import ClassVar
+
+import meshcat
+import numpy as np
+
+from coursekit.io import atomic_write_text
+
+# The camera object meshcat's viewer creates at start-up (see meshcat's viewer ``create_camera``).
+CAMERA_PATH = "/Cameras/default/rotated/<object>"
+# Seconds to wait for the server to print its URLs before giving up.
+_START_TIMEOUT_S = 30.0
+_PR_SET_PDEATHSIG = 1  # from <linux/prctl.h>
+
+
+def _die_with_parent() -> None:
+    """Run in the child between fork and exec: SIGKILL me when my parent dies (Linux only)."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+    except (OSError, AttributeError):  # not Linux: fall back to close()/atexit only
+        pass
+
+
+def _start_server() -> tuple[subprocess.Popen, str, str]:
+    """Start ``python -m meshcat.servers.zmqserver``; return (process, zmq_url, web_url).
+
+    The same command line and environment as ``meshcat.servers.zmqserver.
+    start_zmq_server_as_subprocess``, plus the parent-death signal and a start-up timeout.
+    """
+    env = dict(os.environ)
+    # meshcat passes its own location on PYTHONPATH (robust when it was added by sys.path hacks).
+    env["PYTHONPATH"] = os.path.dirname(os.path.dirname(meshcat.__file__))
+    proc = subprocess.Popen(
+        [sys.executable, "-u", "-m", "meshcat.servers.zmqserver"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,  # the server logs each websocket; nobody reads it, never let it block
+        env=env,
+        start_new_session=True,  # a Ctrl-C in a notebook cell must not take the server down
+        preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None,
+    )
+    deadline = time.monotonic() + _START_TIMEOUT_S
+    zmq_url = web_url = None
+    while web_url is None:
+        line = proc.stdout.readline().decode("utf-8", "replace").strip()
+        if line.startswith("zmq_url="):
+            zmq_url = line.split("=", 1)[1]
+        elif line.startswith("web_url="):
+            web_url = line.split("=", 1)[1]
+        elif not line and proc.poll() is not None:
+            raise RuntimeError(f"the meshcat server exited at start-up with code {proc.returncode}")
+        if time.monotonic() > deadline:
+            proc.kill()
+            proc.wait()
+            raise RuntimeError(f"the meshcat server did not start within {_START_TIMEOUT_S:.0f} s")
+    if zmq_url is None:
+        proc.kill()
+        proc.wait()
+        raise RuntimeError("the meshcat server printed a web URL but no zmq URL")
+    return proc, zmq_url, web_url
+
+
+def translation(xyz: Sequence[float]) -> np.ndarray:
+    """(4, 4) homogeneous transform that translates by ``xyz`` (3,)."""
+    tf = np.eye(4)
+    tf[:3, 3] = np.asarray(xyz, dtype=float)
+    return tf
+
+
+def pose_matrix(position: Sequence[float], rotation: np.ndarray) -> np.ndarray:
+    """(4, 4) homogeneous transform from a position (3,) and a rotation matrix (3, 3)."""
+    tf = np.eye(4)
+    tf[:3, :3] = np.asarray(rotation, dtype=float).reshape(3, 3)  # (3, 3)
+    tf[:3, 3] = np.asarray(position, dtype=float)
+    return tf
+
+
+def rgb_hex(rgb: Sequence[float]) -> int:
+    """Colour as meshcat wants it (0xRRGGBB int) from r, g, b in [0, 1]."""
+    r, g, b = (int(round(255 * float(np.clip(c, 0.0, 1.0)))) for c in rgb[:3])
+    return (r << 16) | (g << 8) | b
+
+
+class MeshcatScene:
+    """One meshcat Visualizer and the server process behind it; use ``with`` or call :meth:`close`.
+
+    >>> with MeshcatScene() as scene:          # doctest: +SKIP
+    ...     scene.vis["box"].set_object(meshcat.geometry.Box([1, 1, 1]))
+    ...     scene.save_html("box.html")
+
+    Attributes:
+        vis: the root ``meshcat.Visualizer``; index it (``vis["pusht/block"]``) to make objects.
+        server_pid: process id of the server subprocess (to check that it is gone after close).
+        web_url: the live server's URL (only useful while the process lives; prefer the HTML).
+    """
+
+    _shared: ClassVar[MeshcatScene | None] = None
+    """The scene handed out by :func:`shared_scene` (one server per process)."""
+
+    def __init__(self) -> None:
+        self._proc, zmq_url, self.web_url = _start_server()
+        self.server_pid: int = self._proc.pid
+        atexit.register(self.close)
+        try:
+            # Visualizer(zmq_url=...) connects to our server instead of starting its own; it
+            # prints the URL on stdout, which would only clutter notebooks and test logs.
+            with contextlib.redirect_stdout(io.StringIO()):
+                self.vis = meshcat.Visualizer(zmq_url=zmq_url)
+        except BaseException:
+            self.close()
+            raise
+
+    # -- lifetime -----------------------------------------------------------------------------
+    @property
+    def closed(self) -> bool:
+        """True once :meth:`close` ran (the server is dead and the Visualizer unusable)."""
+        return self._proc is None
+
+    def close(self) -> None:
+        """Kill the server process and close the zmq socket. Safe to call twice."""
+        proc, self._proc = self._proc, None
+        if proc is None:
+            return
+        atexit.unregister(self.close)
+        window = getattr(getattr(self, "vis", None), "window", None)
+        if window is not None:
+            window.zmq_socket.close(linger=0)
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait(timeout=10)
+        if proc.stdout is not None:
+            proc.stdout.close()
+
+    def __enter__(self) -> MeshcatScene:
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        self.close()
+
+    def _check_open(self) -> None:
+        if self.closed:
+            raise RuntimeError("this MeshcatScene is closed (its server was killed); make a new one")
+
+    # -- scene housekeeping ----------------------------------------------------------------------
+    def clear(self) -> None:
+        """Delete every object, transform, property and animation (a blank scene, same server)."""
+        self._check_open()
+        self.vis.delete()
+
+    def set_background(self, top_rgb: Sequence[float], bottom_rgb: Sequence[float] | None = None) -> None:
+        """Background gradient colours, r, g, b in [0, 1] (bottom defaults to top: a flat colour)."""
+        self._check_open()
+        bottom_rgb = top_rgb if bottom_rgb is None else bottom_rgb
+        self.vis["/Background"].set_property("top_color", [float(c) for c in top_rgb[:3]])
+        self.vis["/Background"].set_property("bottom_color", [float(c) for c in bottom_rgb[:3]])
+
+    def hide_grid_and_axes(self) -> None:
+        """Hide meshcat's default 20 m grid and axes triad (they dwarf a table-top scene)."""
+        self._check_open()
+        self.vis["/Grid"].set_property("visible", False)
+        self.vis["/Axes"].set_property("visible", False)
+
+    def set_camera(self, position: Sequence[float]) -> None:
+        """Place the default camera at world ``position`` (3,), z up, looking at the origin.
+
+        The camera node is rotated +90 deg about x (three.js is y-up), so world (x, y, z) is
+        (x, z, -y) in the camera's parent frame. The orbit controls keep looking at the origin.
+        """
+        self._check_open()
+        x, y, z = (float(v) for v in position)
+        if not np.isfinite([x, y, z]).all() or (x, y, z) == (0.0, 0.0, 0.0):
+            raise ValueError(f"camera position must be finite and not the origin, got {tuple(position)}")
+        self.vis[CAMERA_PATH].set_property("position", [x, z, -y])
+
+    def frame(self, radius: float, elevation_deg: float = 60.0, azimuth_deg: float = -90.0, fov_deg: float = 75.0,
+              margin: float = 1.1) -> None:
+        """Aim the camera at the origin so that a sphere of ``radius`` (m) fills the view.
+
+        The distance is radius * margin / sin(fov / 2): the sphere just fits the vertical field
+        of view of meshcat's default perspective camera (75 deg), which is the tighter one in a
+        landscape window. ``azimuth_deg`` -90 puts the camera on the -y side looking towards +y,
+        so world +y points up the screen (like a top-down image).
+        """
+        if not radius > 0 or not np.isfinite(radius):
+            raise ValueError(f"radius must be a positive finite number, got {radius}")
+        if not 0 < elevation_deg <= 90:
+            raise ValueError(f"elevation_deg must be in (0, 90], got {elevation_deg}")
+        distance = radius * margin / np.sin(np.radians(fov_deg) / 2)
+        el, az = np.radians(elevation_deg), np.radians(azimuth_deg)
+        # at 90 deg elevation the orbit controls' up vector (z) is degenerate; tilt a hair
+        el = min(el, np.radians(89.0))
+        self.set_camera(distance * np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)]))
+
+    # -- export ----------------------------------------------------------------------------------
+    def static_html(self) -> str:
+        """The whole scene (objects, properties, animation) as one self-contained HTML page."""
+        self._check_open()
+        return self.vis.static_html()
+
+    def save_html(self, path: str | os.PathLike) -> Path:
+        """Write :meth:`static_html` to ``path`` atomically; return the path."""
+        path = Path(path)
+        atomic_write_text(path, self.static_html())
+        return path
+
+
+def shared_scene() -> MeshcatScene:
+    """The process's one :class:`MeshcatScene`, started on first use and restarted if closed.
+
+    A meshcat server is a per-process resource (a subprocess holding two ports), so the course's
+    viewers share one instead of each starting its own. ``MeshcatScene._shared`` is the one
+    deliberate piece of process-wide state in the viz package; ``atexit`` closes what it holds.
+    """
+    scene = MeshcatScene._shared
+    if scene is None or scene.closed:
+        scene = MeshcatScene._shared = MeshcatScene()
+    return scene
