@@ -1,0 +1,174 @@
+"""Image encoder for Diffusion Policy: a ResNet-18-style trunk with GroupNorm and a spatial softmax.
+
+Chi et al. (2023, sec. 3.3): one ResNet-18 per camera, trained from scratch (no ImageNet weights),
+global average pooling replaced by a spatial softmax (32 keypoints, as in robomimic / Levine et al.
+2016), and every BatchNorm replaced by GroupNorm — BatchNorm's running statistics fight the EMA of the
+weights. Augmentation: a random 84x84 crop of the 96x96 image in training, the centre crop in eval.
+
+Departures (flagged): widths are configurable (``VisionEncoderConfig()`` is a narrower CPU version;
+``preset("resnet18")`` has ResNet-18's 64/128/256/512); the keypoints go through Linear -> ReLU to
+``feature_dim`` as in LeRobot's port.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+
+def _pair(v, name: str) -> tuple[int, int]:
+    pair = (v, v) if isinstance(v, int) else tuple(v)
+    if len(pair) != 2 or any(not isinstance(x, int) or x < 1 for x in pair):
+        raise ValueError(f"{name} must be a positive int or an (H, W) pair of them, got {v!r}")
+    return pair
+
+
+@dataclass(frozen=True)
+class VisionEncoderConfig:
+    """Sizes of one camera's encoder."""
+
+    in_channels: int = 3
+    """Image channels (3 for RGB)."""
+    image_size: tuple[int, int] = (96, 96)
+    """Input (H, W) before cropping."""
+    crop_size: tuple[int, int] = (84, 84)
+    """Crop (h, w): random in train(), centred in eval(); equal to image_size for no crop."""
+    widths: tuple[int, ...] = (32, 64, 128, 256)
+    """Channels of the four residual stages (ResNet-18: 64, 128, 256, 512)."""
+    blocks_per_stage: int = 2
+    """BasicBlocks per stage (ResNet-18: 2)."""
+    group_size: int = 16
+    """GroupNorm uses channels // group_size groups (Diffusion Policy's replace_bn_with_gn)."""
+    num_keypoints: int = 32
+    """K, spatial-softmax keypoints."""
+    feature_dim: int = 64
+    """Output features per camera."""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "image_size", _pair(self.image_size, "image_size"))
+        object.__setattr__(self, "crop_size", _pair(self.crop_size, "crop_size"))
+        object.__setattr__(self, "widths", tuple(self.widths))
+        if any(c > s for c, s in zip(self.crop_size, self.image_size)):
+            raise ValueError(f"crop_size {self.crop_size} must fit in image_size {self.image_size}")
+        if not self.widths or any(not isinstance(w, int) or w < self.group_size or w % self.group_size
+                                  for w in self.widths):
+            raise ValueError(f"widths must be multiples of group_size={self.group_size}, got {self.widths!r}")
+        for name in ("in_channels", "blocks_per_stage", "group_size", "num_keypoints", "feature_dim"):
+            v = getattr(self, name)
+            if not isinstance(v, int) or v < 1:
+                raise ValueError(f"{name} must be a positive int, got {v!r}")
+
+    @classmethod
+    def preset(cls, name: str) -> "VisionEncoderConfig":
+        """"cpu" (default, narrower) or "resnet18" (the paper's widths 64/128/256/512)."""
+        presets = {"cpu": cls(), "resnet18": cls(widths=(64, 128, 256, 512))}
+        if name not in presets:
+            raise ValueError(f"unknown vision preset {name!r}; expected one of {sorted(presets)}")
+        return presets[name]
+
+
+def random_crop(images: torch.Tensor, size, generator: torch.Generator | None = None) -> torch.Tensor:
+    """Crop each image of (B, C, H, W) at its own random offset to (B, C, h, w)."""
+    h, w = _pair(size, "size")
+    B, C, H, W = images.shape
+    if h > H or w > W:
+        raise ValueError(f"crop {(h, w)} larger than images {(H, W)}")
+    gen_device = generator.device if generator is not None else images.device
+    top = torch.randint(0, H - h + 1, (B,), generator=generator, device=gen_device).to(images.device)
+    left = torch.randint(0, W - w + 1, (B,), generator=generator, device=gen_device).to(images.device)
+    rows = (top[:, None] + torch.arange(h, device=images.device))  # (B, h)
+    cols = (left[:, None] + torch.arange(w, device=images.device))  # (B, w)
+    b = torch.arange(B, device=images.device)[:, None, None]  # (B, 1, 1)
+    out = images.permute(0, 2, 3, 1)[b, rows[:, :, None], cols[:, None, :]]  # (B, h, w, C)
+    return out.permute(0, 3, 1, 2)  # (B, C, h, w)
+
+
+def center_crop(images: torch.Tensor, size) -> torch.Tensor:
+    """Centre crop (B, C, H, W) -> (B, C, h, w)."""
+    h, w = _pair(size, "size")
+    H, W = images.shape[-2:]
+    if h > H or w > W:
+        raise ValueError(f"crop {(h, w)} larger than images {(H, W)}")
+    top, left = (H - h) // 2, (W - w) // 2
+    return images[..., top:top + h, left:left + w]
+
+
+class SpatialSoftmax(nn.Module):
+    """Keypoints from a feature map (Levine et al. 2016): (B, C, H, W) -> (B, K, 2).
+
+    A 1x1 conv makes K heat maps; a softmax over the H*W positions of each gives a distribution whose
+    expected (x, y) in [-1, 1] is the keypoint.
+    """
+
+    def __init__(self, in_channels: int, num_keypoints: int) -> None:
+        super().__init__()
+        self.to_maps = nn.Conv2d(in_channels, num_keypoints, 1)
+        self.num_keypoints = num_keypoints
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        B, _, H, W = x.shape
+        maps = self.to_maps(x).flatten(2)  # (B, K, H*W)
+        attn = maps.softmax(dim=-1)  # (B, K, H*W)
+        ys, xs = torch.meshgrid(torch.linspace(-1, 1, H, device=x.device, dtype=x.dtype),
+                                torch.linspace(-1, 1, W, device=x.device, dtype=x.dtype), indexing="ij")
+        grid = torch.stack([xs.reshape(-1), ys.reshape(-1)], dim=-1)  # (H*W, 2) as (x, y)
+        return attn @ grid  # (B, K, 2)
+
+
+class BasicBlock(nn.Module):
+    """ResNet basic block with GroupNorm: two 3x3 convs, identity or 1x1-conv skip."""
+
+    def __init__(self, cin: int, cout: int, stride: int, group_size: int) -> None:
+        super().__init__()
+        self.conv1 = nn.Conv2d(cin, cout, 3, stride=stride, padding=1, bias=False)
+        self.norm1 = nn.GroupNorm(cout // group_size, cout)
+        self.conv2 = nn.Conv2d(cout, cout, 3, padding=1, bias=False)
+        self.norm2 = nn.GroupNorm(cout // group_size, cout)
+        self.skip = nn.Identity()
+        if stride != 1 or cin != cout:
+            self.skip = nn.Sequential(nn.Conv2d(cin, cout, 1, stride=stride, bias=False),
+                                      nn.GroupNorm(cout // group_size, cout))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        h = F.relu(self.norm1(self.conv1(x)))
+        return F.relu(self.norm2(self.conv2(h)) + self.skip(x))
+
+
+class VisionEncoder(nn.Module):
+    """One camera: images (B, C, H, W) in [-1, 1] -> features (B, feature_dim).
+
+    In ``train()`` mode each image is randomly cropped to ``crop_size``; in ``eval()`` the centre crop.
+    """
+
+    def __init__(self, config: VisionEncoderConfig | None = None) -> None:
+        super().__init__()
+        self.config = cfg = config if config is not None else VisionEncoderConfig()
+        w0 = cfg.widths[0]
+        # ResNet stem: 7x7/2 conv, norm, ReLU, 3x3/2 max-pool.
+        self.stem = nn.Sequential(nn.Conv2d(cfg.in_channels, w0, 7, stride=2, padding=3, bias=False),
+                                  nn.GroupNorm(w0 // cfg.group_size, w0), nn.ReLU(),
+                                  nn.MaxPool2d(3, stride=2, padding=1))
+        stages, cin = [], w0
+        for i, cout in enumerate(cfg.widths):
+            for j in range(cfg.blocks_per_stage):
+                stride = 2 if (i > 0 and j == 0) else 1
+                stages.append(BasicBlock(cin, cout, stride, cfg.group_size))
+                cin = cout
+        self.stages = nn.Sequential(*stages)
+        self.pool = SpatialSoftmax(cin, cfg.num_keypoints)
+        self.out = nn.Linear(2 * cfg.num_keypoints, cfg.feature_dim)
+
+    def forward(self, images: torch.Tensor, generator: torch.Generator | None = None) -> torch.Tensor:
+        cfg = self.config
+        if images.ndim != 4 or images.shape[1] != cfg.in_channels or tuple(images.shape[-2:]) != cfg.image_size:
+            raise ValueError(f"images must be (B, {cfg.in_channels}, {cfg.image_size[0]}, {cfg.image_size[1]}), "
+                             f"got {tuple(images.shape)}")
+        if cfg.crop_size != cfg.image_size:
+            images = random_crop(images, cfg.crop_size, generator) if self.training \
+                else center_crop(images, cfg.crop_size)  # (B, C, h, w)
+        x = self.stages(self.stem(images))  # (B, widths[-1], h', w')
+        keypoints = self.pool(x)  # (B, K, 2)
+        return F.relu(self.out(keypoints.flatten(1)))  # (B, feature_dim)

@@ -1,0 +1,68 @@
+"""The GroupNorm ResNet image encoder, spatial softmax and crops."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+from torch import nn
+
+from coursekit.nn import SpatialSoftmax, VisionEncoder, VisionEncoderConfig, center_crop, random_crop
+
+TINY = VisionEncoderConfig(widths=(16, 16, 32, 32), blocks_per_stage=1, num_keypoints=8, feature_dim=24)
+
+
+def test_shapes_in_train_and_eval_and_no_batchnorm():
+    torch.manual_seed(0)
+    enc = VisionEncoder(TINY)
+    x = torch.rand(2, 3, 96, 96) * 2 - 1
+    assert enc.train()(x, generator=torch.Generator().manual_seed(0)).shape == (2, 24)
+    assert enc.eval()(x).shape == (2, 24)
+    for cfg in (TINY, VisionEncoderConfig.preset("resnet18")):
+        mods = list(VisionEncoder(cfg).modules())
+        assert not any(isinstance(m, nn.modules.batchnorm._BatchNorm) for m in mods)
+        assert any(isinstance(m, nn.GroupNorm) for m in mods)
+
+
+def test_resnet18_preset_size():
+    n = sum(p.numel() for p in VisionEncoder(VisionEncoderConfig.preset("resnet18")).parameters())
+    assert 11.0e6 < n < 11.5e6  # ResNet-18's conv trunk is 11.2 M parameters
+
+
+def test_eval_is_deterministic_train_crop_is_seeded():
+    enc = VisionEncoder(TINY)
+    x = torch.rand(3, 3, 96, 96)
+    enc.eval()
+    torch.testing.assert_close(enc(x), enc(x))
+    enc.train()
+    a = enc(x, generator=torch.Generator().manual_seed(5))
+    torch.testing.assert_close(a, enc(x, generator=torch.Generator().manual_seed(5)))
+
+
+def test_crops_against_slicing():
+    x = torch.arange(2 * 1 * 6 * 6, dtype=torch.float32).reshape(2, 1, 6, 6)
+    torch.testing.assert_close(center_crop(x, 4), x[..., 1:5, 1:5])
+    g = torch.Generator().manual_seed(0)
+    out = random_crop(x, (4, 3), generator=g)
+    g = torch.Generator().manual_seed(0)
+    top, left = torch.randint(0, 3, (2,), generator=g), torch.randint(0, 4, (2,), generator=g)
+    for i in range(2):
+        torch.testing.assert_close(out[i], x[i, :, top[i]:top[i] + 4, left[i]:left[i] + 3])
+
+
+def test_spatial_softmax_finds_the_peak():
+    ss = SpatialSoftmax(1, 1)
+    with torch.no_grad():
+        ss.to_maps.weight.fill_(1.0)
+        ss.to_maps.bias.zero_()
+    fmap = torch.zeros(1, 1, 5, 9)
+    fmap[0, 0, 4, 0] = 100.0  # bottom-left corner: x = -1, y = +1
+    torch.testing.assert_close(ss(fmap), torch.tensor([[[-1.0, 1.0]]]), atol=1e-4, rtol=0)
+
+
+def test_bad_input_raises():
+    with pytest.raises(ValueError, match=r"got \(2, 3, 64, 64\)"):
+        VisionEncoder(TINY)(torch.rand(2, 3, 64, 64))
+    with pytest.raises(ValueError, match="crop_size"):
+        VisionEncoderConfig(crop_size=(100, 100))
+    with pytest.raises(ValueError, match="group_size"):
+        VisionEncoderConfig(widths=(24, 32))
