@@ -1,0 +1,204 @@
+"""The two ACT simulation tasks: object spawning, the published stage reward and a strict success.
+
+Both tasks keep the published reward (Zhao et al. 2023, the ``sim_env`` code) for comparability:
+a stage 0-4 computed from the contacts of the current physics state, with success = stage 4
+reached at some step. That reward is lenient: a cube that brushes a finger of the left gripper in
+mid-air while falling counts as stage 4. So each task also judges a STRICT success on the final
+state of the episode (see ``strict_success``); the scripted demonstrations keep only episodes that
+pass it.
+
+Object poses ("env_state") are stored as MuJoCo free-joint coordinates: per object
+[x, y, z, qw, qx, qy, qz] (7,), so transfer cube has (7,) and insertion (14,) [peg, socket].
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from coursekit.envs.aloha.model import ArmPairIndex
+
+_IDENTITY_QUAT = np.array([1.0, 0.0, 0.0, 0.0])
+
+
+def _contact_pairs(data: mujoco.MjData) -> set[tuple[int, int]]:
+    """Set of (smaller geom id, larger geom id) for every active contact."""
+    geoms = data.contact.geom[: data.ncon]  # (ncon, 2)
+    return {(min(a, b), max(a, b)) for a, b in geoms.tolist()}
+
+
+def _touch(pairs: set[tuple[int, int]], group_a: list[int], group_b: list[int]) -> bool:
+    return any((min(a, b), max(a, b)) in pairs for a in group_a for b in group_b)
+
+
+class AlohaTask:
+    """One task: which free bodies it has, how they spawn, and how it is judged.
+
+    Subclasses set ``name``, ``objects`` (free-joint body names, in env_state order) and
+    ``spawn_ranges`` (per object: ((x_lo, x_hi), (y_lo, y_hi), z) in metres).
+    """
+
+    name: str = ""
+    objects: tuple[str, ...] = ()
+    spawn_ranges: tuple[tuple[tuple[float, float], tuple[float, float], float], ...] = ()
+
+    def __init__(self, model: mujoco.MjModel) -> None:
+        self.model = model
+        self.index = ArmPairIndex.from_model(model)
+        self.table = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "table")]
+        self.object_qpos_adr = []
+        self.object_qvel_adr = []
+        for body in self.objects:
+            bid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, body)
+            jnt = model.body_jntadr[bid]
+            self.object_qpos_adr.append(model.jnt_qposadr[jnt])
+            self.object_qvel_adr.append(model.jnt_dofadr[jnt])
+        self.left_pads = self.index.pad_geoms[0].tolist()
+        self.right_pads = self.index.pad_geoms[1].tolist()
+
+    @property
+    def env_state_dim(self) -> int:
+        return 7 * len(self.objects)
+
+    def _geom(self, name: str) -> int:
+        return mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_GEOM, name)
+
+    # ---- object poses --------------------------------------------------------------------
+    def spawn(self, rng: np.random.Generator) -> np.ndarray:
+        """(7 * n_objects,) random object poses from the published spawn ranges (upright)."""
+        poses = []
+        for (x_range, y_range, z) in self.spawn_ranges:
+            xyz = [rng.uniform(*x_range), rng.uniform(*y_range), z]
+            poses.append(np.concatenate([xyz, _IDENTITY_QUAT]))
+        return np.concatenate(poses)
+
+    def set_env_state(self, data: mujoco.MjData, env_state: np.ndarray) -> None:
+        """Put the objects at (7 * n_objects,) poses, at rest."""
+        for i, (qa, va) in enumerate(zip(self.object_qpos_adr, self.object_qvel_adr)):
+            pose = np.asarray(env_state[7 * i: 7 * i + 7], dtype=float)
+            data.qpos[qa: qa + 3] = pose[:3]
+            data.qpos[qa + 3: qa + 7] = pose[3:] / np.linalg.norm(pose[3:])
+            data.qvel[va: va + 6] = 0.0
+
+    def env_state(self, data: mujoco.MjData) -> np.ndarray:
+        """(7 * n_objects,) current object poses [x, y, z, qw, qx, qy, qz] per object."""
+        return np.concatenate([data.qpos[qa: qa + 7] for qa in self.object_qpos_adr]).copy()
+
+    # ---- judging -------------------------------------------------------------------------
+    def stage(self, data: mujoco.MjData) -> int:
+        """The published reward stage 0-4 of the current state (from its contacts)."""
+        raise NotImplementedError
+
+    def strict_success(self, data: mujoco.MjData) -> bool:
+        """Whether the current state is a finished task (judge it on the episode's last state)."""
+        raise NotImplementedError
+
+
+class TransferCubeTask(AlohaTask):
+    """Right arm picks the 4 cm cube and hands it to the left arm."""
+
+    name = "transfer_cube"
+    objects = ("cube",)
+    spawn_ranges = (((0.0, 0.2), (0.4, 0.6), 0.02),)
+    min_height = 0.05
+    """Strict success: the cube centre must be at least this high (m); it rests at 0.02."""
+
+    def __init__(self, model: mujoco.MjModel) -> None:
+        super().__init__(model)
+        self.cube = [self._geom("cube")]
+
+    def stage(self, data: mujoco.MjData) -> int:
+        # Published stages: 1 right gripper touches the cube, 2 lifted (right touches, table does
+        # not), 3 left gripper touches, 4 left touches and neither the table nor the right does.
+        pairs = _contact_pairs(data)
+        right = _touch(pairs, self.cube, self.right_pads)
+        left = _touch(pairs, self.cube, self.left_pads)
+        table = _touch(pairs, self.cube, self.table)
+        stage = 0
+        if right:
+            stage = 1
+        if right and not table:
+            stage = 2
+        if left:
+            stage = 3
+        if left and not table and not right:
+            stage = 4
+        return stage
+
+    def strict_success(self, data: mujoco.MjData) -> bool:
+        # Held by the left gripper only: both left pads touch the cube, no right pad and not the
+        # table, and the cube is clear of the table.
+        pairs = _contact_pairs(data)
+        both_left = all(_touch(pairs, self.cube, [pad]) for pad in self.left_pads)
+        right = _touch(pairs, self.cube, self.right_pads)
+        table = _touch(pairs, self.cube, self.table)
+        z = data.qpos[self.object_qpos_adr[0] + 2]
+        return bool(both_left and not right and not table and z > self.min_height)
+
+
+class InsertionTask(AlohaTask):
+    """Right arm picks the peg, left arm the socket; the peg goes into the socket to the pin."""
+
+    name = "insertion"
+    objects = ("peg", "socket")
+    spawn_ranges = (((0.1, 0.2), (0.4, 0.6), 0.01), ((-0.2, -0.1), (0.4, 0.6), 0.022))
+    peg_half_length = 0.06
+    """Half length of the peg along its x axis (m)."""
+    socket_inner_half = 0.018
+    """Half width of the socket's square opening (m)."""
+    socket_half_length = 0.06
+    """Half length of the socket tube (m)."""
+    pin_end_x = 0.02
+    """Socket-frame x of the pin's free end (m): where an inserted peg tip stops."""
+    tip_tolerance = 0.01
+    """Strict success: the peg tip must be within this distance (m) of the pin's end."""
+
+    def __init__(self, model: mujoco.MjModel) -> None:
+        super().__init__(model)
+        self.peg = [self._geom("peg")]
+        self.socket_walls = [self._geom(f"socket_{w}") for w in ("bottom", "top", "back", "front")]
+        self.pin = [self._geom("pin")]
+        self.peg_body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "peg")
+        self.socket_body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "socket")
+
+    def stage(self, data: mujoco.MjData) -> int:
+        # Published stages: 1 both grippers touch their objects, 2 both lifted, 3 peg touches the
+        # socket (both off the table), 4 peg touches the pin.
+        pairs = _contact_pairs(data)
+        socket = self.socket_walls + self.pin
+        left = _touch(pairs, socket, self.left_pads)
+        right = _touch(pairs, self.peg, self.right_pads)
+        peg_table = _touch(pairs, self.peg, self.table)
+        socket_table = _touch(pairs, socket, self.table)
+        peg_socket = _touch(pairs, self.peg, self.socket_walls)
+        pin = _touch(pairs, self.peg, self.pin)
+        stage = 0
+        if left and right:
+            stage = 1
+        if left and right and not peg_table and not socket_table:
+            stage = 2
+        if peg_socket and not peg_table and not socket_table:
+            stage = 3
+        if pin:
+            stage = 4
+        return stage
+
+    def peg_tip_in_socket(self, data: mujoco.MjData) -> np.ndarray:
+        """(2, 3) both peg ends expressed in the socket's frame (x along the tube)."""
+        ends_local = np.array([[-self.peg_half_length, 0, 0], [self.peg_half_length, 0, 0]])
+        ends_world = data.xpos[self.peg_body] + ends_local @ data.xmat[self.peg_body].reshape(3, 3).T  # (2, 3)
+        rot = data.xmat[self.socket_body].reshape(3, 3)  # (3, 3) socket -> world
+        return (ends_world - data.xpos[self.socket_body]) @ rot  # (2, 3)
+
+    def strict_success(self, data: mujoco.MjData) -> bool:
+        # The peg end nearest the pin lies inside the tube's cross-section, within the tube, and
+        # within tip_tolerance of the pin's free end.
+        ends = self.peg_tip_in_socket(data)
+        tip = ends[np.argmin(ends[:, 0])]
+        inside = bool(np.all(np.abs(tip[1:]) < self.socket_inner_half))
+        in_tube = -self.socket_half_length < tip[0] < self.pin_end_x + self.tip_tolerance
+        return inside and bool(in_tube)
+
+
+TASKS = {"transfer_cube": TransferCubeTask, "insertion": InsertionTask}
+"""Task name -> task class."""
