@@ -1,0 +1,178 @@
+"""Policy checkpoints: a directory with ``model.safetensors`` + ``config.json``; never a pickle.
+
+Layout::
+
+    CKPT/
+      model.safetensors   the policy's state_dict (tensors only; safetensors cannot hold code)
+      config.json         {"format": "coursekit-checkpoint", "format_version": 1,
+                           "policy_type": "diffusion" | "regression" | "act",
+                           "config": {...the policy's dataclass config...},
+                           "normalizers": {name: {"kind": "minmax", "state": {"low": [...], ...}}},
+                           "dataset": {...dataset meta...}, "training": {...training summary...},
+                           "weights": {"file": "model.safetensors", "sha256": "...", "n_tensors": N,
+                                       "n_parameters": P}, "coursekit_version": "..."}
+
+Writing is atomic at the directory level: both files go into a hidden temporary directory beside
+CKPT, which then replaces CKPT with renames, so a reader sees the old checkpoint or the new one.
+Loading rebuilds the policy from its registered class and config (``coursekit.policies``), checks
+the weights' SHA-256 against config.json, then every tensor name and shape against the freshly
+built policy, and refuses anything else with a :class:`CheckpointError` (a ValueError) that says
+what is wrong. ``torch.load`` is never used.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Any
+
+FORMAT = "coursekit-checkpoint"
+FORMAT_VERSION = 1
+WEIGHTS_FILE = "model.safetensors"
+CONFIG_FILE = "config.json"
+
+
+class CheckpointError(ValueError):
+    """A checkpoint that is missing, corrupt, truncated or does not match the policy it claims."""
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def save_checkpoint(policy: Any, path: str | os.PathLike, *, dataset_meta: dict[str, Any] | None = None,
+                    training: dict[str, Any] | None = None) -> Path:
+    """Write ``policy`` (a ChunkPolicy) to the directory ``path`` atomically; returns the path.
+
+    ``dataset_meta`` (e.g. ``EpisodeDataset.meta``) and ``training`` (the trainer's summary) are
+    stored verbatim in config.json; they must be JSON-serialisable.
+    """
+    from safetensors.torch import save_file
+
+    import coursekit
+    from coursekit.config import config_to_dict
+    from coursekit.policies.base import normalizers_to_json
+
+    if not getattr(policy, "policy_type", ""):
+        raise ValueError(f"save_checkpoint needs a policy with a policy_type, got {type(policy).__name__}")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tensors = {k: v.detach().to("cpu").contiguous().clone() for k, v in policy.state_dict().items()}
+    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+    try:
+        weights = tmp / WEIGHTS_FILE
+        save_file(tensors, str(weights), metadata={"format": FORMAT, "policy_type": policy.policy_type})
+        info = {
+            "format": FORMAT,
+            "format_version": FORMAT_VERSION,
+            "policy_type": policy.policy_type,
+            "config": config_to_dict(policy.config),
+            "normalizers": normalizers_to_json(policy.normalizers),
+            "dataset": dataset_meta or {},
+            "training": training or {},
+            "weights": {"file": WEIGHTS_FILE, "sha256": _sha256(weights), "n_tensors": len(tensors),
+                        "n_parameters": int(sum(p.numel() for p in policy.parameters()))},
+            "coursekit_version": coursekit.__version__,
+        }
+        (tmp / CONFIG_FILE).write_text(json.dumps(info, indent=1, sort_keys=True) + "\n")
+        for f in (weights, tmp / CONFIG_FILE):
+            with open(f, "rb") as fh:
+                os.fsync(fh.fileno())
+        # Swap directories: old -> aside, new -> path, then delete the old one.
+        old = None
+        if path.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".old", dir=path.parent))
+            os.replace(path, old / "ckpt")
+        os.replace(tmp, path)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+    return path
+
+
+def read_checkpoint_info(path: str | os.PathLike) -> dict[str, Any]:
+    """The parsed, format-checked config.json of a checkpoint directory (no weights loaded)."""
+    path = Path(path)
+    if not path.is_dir():
+        raise FileNotFoundError(f"checkpoint directory not found: {str(path)!r} "
+                                f"(expected a directory with {WEIGHTS_FILE} and {CONFIG_FILE})")
+    cfg = path / CONFIG_FILE
+    if not cfg.is_file():
+        raise FileNotFoundError(f"checkpoint {str(path)!r} has no {CONFIG_FILE}")
+    try:
+        info = json.loads(cfg.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise CheckpointError(f"{str(cfg)!r} is not valid JSON ({exc}); the checkpoint is corrupt") from exc
+    if not isinstance(info, dict) or info.get("format") != FORMAT:
+        raise CheckpointError(f"{str(cfg)!r} is not a coursekit checkpoint (format={info.get('format') if isinstance(info, dict) else None!r})")
+    if info.get("format_version") != FORMAT_VERSION:
+        raise CheckpointError(f"{str(cfg)!r} has format_version {info.get('format_version')!r}; this coursekit reads {FORMAT_VERSION}")
+    for key in ("policy_type", "config", "normalizers", "weights"):
+        if key not in info:
+            raise CheckpointError(f"{str(cfg)!r} lacks the {key!r} entry")
+    return info
+
+
+def load_checkpoint(path: str | os.PathLike, device: Any = "auto", expected_type: str | None = None) -> Any:
+    """Rebuild the policy saved in ``path`` (in eval mode, on ``device``); refuse anything inconsistent.
+
+    Args:
+        path: checkpoint directory.
+        device: "auto", "cpu", "cuda", ... (``coursekit.device.resolve_device``).
+        expected_type: if given, the checkpoint's policy_type must equal it.
+    """
+    from safetensors import SafetensorError
+    from safetensors.torch import load_file
+
+    from coursekit.config import config_from_dict
+    from coursekit.device import resolve_device
+    from coursekit.policies import get_policy_class
+    from coursekit.policies.base import normalizers_from_json
+
+    path = Path(path)
+    info = read_checkpoint_info(path)
+    ptype = info["policy_type"]
+    if expected_type is not None and ptype != expected_type:
+        raise CheckpointError(f"checkpoint {str(path)!r} holds a {ptype!r} policy, expected {expected_type!r}")
+    try:
+        cls = get_policy_class(ptype)
+    except ValueError as exc:
+        raise CheckpointError(f"checkpoint {str(path)!r}: {exc}") from exc
+    try:
+        config = config_from_dict(cls.config_class, info["config"])
+        normalizers = normalizers_from_json(info["normalizers"])
+    except (ValueError, TypeError) as exc:
+        raise CheckpointError(f"checkpoint {str(path)!r} has a config that does not fit {cls.__name__}: {exc}") from exc
+    weights = path / info["weights"].get("file", WEIGHTS_FILE)
+    if not weights.is_file():
+        raise FileNotFoundError(f"checkpoint {str(path)!r} has no weights file {weights.name}")
+    digest = _sha256(weights)
+    if digest != info["weights"].get("sha256"):
+        raise CheckpointError(f"{str(weights)!r} does not match config.json (sha256 {digest[:12]}... vs "
+                              f"{str(info['weights'].get('sha256'))[:12]}...): truncated, corrupt or from another checkpoint")
+    try:
+        tensors = load_file(str(weights))
+    except (SafetensorError, OSError, ValueError) as exc:
+        raise CheckpointError(f"{str(weights)!r} cannot be read as safetensors ({exc})") from exc
+    policy = cls(config, normalizers)
+    expected = policy.state_dict()
+    missing, unexpected = sorted(set(expected) - set(tensors)), sorted(set(tensors) - set(expected))
+    if missing or unexpected:
+        raise CheckpointError(f"checkpoint {str(path)!r} does not fit {cls.__name__}: missing tensors {missing[:5]}, "
+                              f"unexpected tensors {unexpected[:5]}")
+    for name, t in tensors.items():
+        if tuple(t.shape) != tuple(expected[name].shape):
+            raise CheckpointError(f"checkpoint {str(path)!r}: tensor {name!r} has shape {tuple(t.shape)}, "
+                                  f"the config builds {tuple(expected[name].shape)}")
+    policy.load_state_dict(tensors, strict=True)
+    return policy.to(resolve_device(device)).eval()

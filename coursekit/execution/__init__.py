@@ -1,0 +1,27 @@
+"""Executors: turn a chunk predictor (B, To, ...) -> (B, Tp, Da) into one action per step.
+
+Every executor has ``reset(obs (B, ...))`` and ``act(obs (B, ...)) -> (B, Da)``:
+
+- :class:`RecedingHorizon` (Diffusion Policy): execute Ta actions of each chunk, then re-plan.
+- :class:`TemporalEnsemble` (ACT): predict every step, average the overlapping chunks.
+
+Classes load lazily (``coursekit.execution.receding`` needs neither torch nor numpy at import).
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+_LAZY = {
+    "RecedingHorizon": "coursekit.execution.receding",
+    "stack_history": "coursekit.execution.receding",
+    "TemporalEnsemble": "coursekit.execution.ensembling",
+}
+__all__ = sorted(_LAZY)
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _LAZY:
+        raise AttributeError(f"module 'coursekit.execution' has no attribute {name!r}")
+    return getattr(importlib.import_module(_LAZY[name]), name)

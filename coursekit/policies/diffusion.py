@@ -1,0 +1,129 @@
+"""Diffusion Policy (Chi et al., RSS 2023): a chunk of actions sampled by denoising, given observations.
+
+Training (Sec. 3.1, eq. 5): normalise a window's To observations and Tp actions to [-1, 1], noise
+the action chunk to a random step t, and train the conditional U-Net to predict the noise::
+
+    loss = E_{t, eps} || eps - eps_theta(sqrt(abar_t) a_0 + sqrt(1 - abar_t) eps, t, o) ||^2
+
+Inference (eq. 4): start from a_T ~ N(0, I) (B, Tp, Da) and denoise with DDPM (T = 100 steps, as in
+the paper's simulation results) or DDIM (10 steps by default: a CPU needs it), then unnormalise.
+``predict_chunk`` returns all Tp actions; which of them are executed is the executor's business
+(``coursekit.execution.RecedingHorizon``: pred[To-1 : To-1+Ta]).
+
+Departures from the reference code, on purpose: no observation inpainting / local conditioning
+(the paper's best state results use global FiLM conditioning, as here); DDIM is the default
+sampler for speed (``sampler="ddpm"`` reproduces the paper's evaluation setting).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import torch
+
+from coursekit.diffusion.loss import diffusion_loss, epsilon_loss
+from coursekit.diffusion.samplers import DDIMSampler, DDPMSampler
+from coursekit.diffusion.schedules import NoiseSchedule
+from coursekit.policies.base import Normalizer
+from coursekit.policies.unet_chunk import UNetChunkConfig, UNetChunkPolicy
+
+SAMPLERS = ("ddim", "ddpm")
+
+
+@dataclass
+class DiffusionPolicyConfig(UNetChunkConfig):
+    """Diffusion Policy: the shared inputs/U-Net settings plus the noise schedule and sampler."""
+
+    num_train_timesteps: int = 100
+    """T: diffusion steps of the forward process."""
+    beta_schedule: str = "squaredcos_cap_v2"
+    """Noise schedule: 'squaredcos_cap_v2' (cosine, paper) or 'linear'."""
+    clip_sample: bool = True
+    """Clip the predicted clean chunk to [-1, 1] at every sampler step (needs min-max normalisation)."""
+    sampler: str = "ddim"
+    """Default sampler for predict_chunk: 'ddim' (fast) or 'ddpm' (the paper's simulation setting)."""
+    num_inference_steps: int = 10
+    """Denoising steps of the default sampler (DDPM uses T when sampler='ddpm' and this is left at 10)."""
+    ddim_eta: float = 0.0
+    """DDIM stochasticity: 0 = deterministic given a_T (Song et al. 2021, eq. 16)."""
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if not isinstance(self.num_train_timesteps, int) or self.num_train_timesteps < 2:
+            raise ValueError(f"num_train_timesteps must be an int >= 2, got {self.num_train_timesteps!r}")
+        if self.beta_schedule not in ("squaredcos_cap_v2", "linear"):
+            raise ValueError(f"beta_schedule must be 'squaredcos_cap_v2' or 'linear', got {self.beta_schedule!r}")
+        if self.sampler not in SAMPLERS:
+            raise ValueError(f"sampler must be one of {SAMPLERS}, got {self.sampler!r}")
+        if not isinstance(self.num_inference_steps, int) or not 1 <= self.num_inference_steps <= self.num_train_timesteps:
+            raise ValueError(f"num_inference_steps must be an int in [1, T={self.num_train_timesteps}], "
+                             f"got {self.num_inference_steps!r}")
+        if not 0.0 <= float(self.ddim_eta) <= 1.0:
+            raise ValueError(f"ddim_eta must be in [0, 1], got {self.ddim_eta!r}")
+
+
+class DiffusionPolicy(UNetChunkPolicy):
+    """Epsilon-prediction Diffusion Policy over action chunks (B, Tp, Da). See module docstring."""
+
+    policy_type = "diffusion"
+    config_class = DiffusionPolicyConfig
+    config: DiffusionPolicyConfig
+
+    def __init__(self, config: DiffusionPolicyConfig, normalizers: Mapping[str, Normalizer] | None = None):
+        super().__init__(config, normalizers)
+        self.schedule = NoiseSchedule(num_train_timesteps=config.num_train_timesteps,
+                                      beta_schedule=config.beta_schedule)
+
+    def compute_loss(self, batch: Mapping[str, Any], loss_fn: Callable[..., torch.Tensor] = epsilon_loss,
+                     generator: torch.Generator | None = None) -> dict[str, torch.Tensor]:
+        """Raw batch {obs keys: (B, To, ...), "action": (B, Tp, Da)} -> {"loss": scalar}.
+
+        ``loss_fn`` is the epsilon loss (a student's ``epsilon_loss`` plugs in here);
+        t and eps come from ``generator`` (None: torch's global generator).
+        """
+        cond, action_n = self._batch_parts(batch)  # (B, cond_dim), (B, Tp, Da)
+        loss = diffusion_loss(self.unet, action_n, cond, self.schedule, generator=generator, loss_fn=loss_fn)
+        return {"loss": loss}
+
+    def make_sampler(self, sampler: str | None = None, num_inference_steps: int | None = None) -> DDIMSampler | DDPMSampler:
+        """A sampler over this policy's schedule: 'ddim' (default steps from config) or 'ddpm' (default T)."""
+        c = self.config
+        kind = sampler or c.sampler
+        if kind == "ddim":
+            return DDIMSampler(self.schedule, num_inference_steps or c.num_inference_steps, eta=c.ddim_eta,
+                               clip_sample=c.clip_sample)
+        if kind == "ddpm":
+            if num_inference_steps is None and sampler is None and c.sampler == "ddpm":
+                num_inference_steps = c.num_inference_steps
+            return DDPMSampler(self.schedule, num_inference_steps, clip_sample=c.clip_sample)
+        raise ValueError(f"sampler must be one of {SAMPLERS}, got {kind!r}")
+
+    @torch.no_grad()
+    def predict_chunk(self, obs_history: Any, sampler: str | None = None, num_inference_steps: int | None = None,
+                      generator: torch.Generator | None = None, return_trajectory: bool = False) -> Any:
+        """Raw history (B, To, Do) (or dict for images; or unbatched (To, Do)) -> raw chunk (B, Tp, Da).
+
+        Numpy in, numpy out; tensors in, tensors out. ``sampler``/``num_inference_steps`` override
+        the config; a_T and any sampler noise come from ``generator`` (None: global generator).
+        With ``return_trajectory`` also returns the denoising path (n+1, B, Tp, Da) in raw units.
+        """
+        self._require_normalizers()
+        c = self.config
+        obs, unbatched = self._obs_dict(obs_history)
+        was_training = self.training
+        self.eval()  # centre crop for images; no dropout anywhere
+        try:
+            cond = self.encode_obs(obs)  # (B, cond_dim)
+            shape = (cond.shape[0], c.horizon, c.action_dim)
+            out = self.make_sampler(sampler, num_inference_steps).sample(
+                self.unet, shape, cond=cond, generator=generator, device=cond.device,
+                return_trajectory=return_trajectory)
+        finally:
+            self.train(was_training)
+        if return_trajectory:
+            chunk_n, traj_n = out
+            traj = self.normalizers["action"].unnormalize(traj_n)  # (n+1, B, Tp, Da)
+            return self._finish(chunk_n, obs_history, unbatched), traj
+        return self._finish(out, obs_history, unbatched)

@@ -1,0 +1,269 @@
+"""The trainer, shared by every chunk policy: AdamW, warm-up + cosine LR, EMA weights, a time budget.
+
+It knows nothing about diffusion: it draws batches from an iterable, calls
+``policy.compute_loss(batch)["loss"]``, steps the optimiser, updates the EMA copy and writes
+checkpoints. Defaults follow Diffusion Policy's training recipe (Chi et al. 2023, App. A and the
+reference config): AdamW(lr 1e-4, betas (0.95, 0.999), weight decay 1e-6), 500 warm-up steps
+then cosine decay stepped per batch, batch 256, EMA with decay ``1 - (1 + step)^-0.75`` capped
+at 0.9999. ACT uses the same trainer with its own settings (constant LR, no EMA, ...).
+
+A run ends at ``max_steps`` or after ``minutes`` of wall-clock time, whichever comes first. With
+only a time budget the cosine schedule runs on elapsed time (the fraction of the budget used),
+so the LR still reaches ~0 when time is up however fast the machine is; with ``max_steps`` the
+schedule is the usual step-based one and the run is bit-for-bit deterministic on a CPU.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import torch
+from tqdm.auto import tqdm
+
+from coursekit.config import config_to_dict
+
+LR_SCHEDULES = ("cosine", "constant")
+
+
+@dataclass
+class TrainConfig:
+    """Optimiser, schedule, EMA and budget settings of one training run."""
+
+    lr: float = 1e-4
+    """Peak learning rate of AdamW."""
+    betas: tuple[float, float] = (0.95, 0.999)
+    """AdamW betas (Diffusion Policy uses beta1 = 0.95)."""
+    weight_decay: float = 1e-6
+    """AdamW decoupled weight decay."""
+    lr_schedule: str = "cosine"
+    """'cosine' (warm-up then cosine to 0) or 'constant' (warm-up then flat; ACT)."""
+    warmup_steps: int = 500
+    """Linear warm-up length in optimiser steps (LR stepped per batch)."""
+    batch_size: int = 256
+    """Samples per optimiser step (used by the caller's batcher; recorded in the summary)."""
+    max_steps: int | None = None
+    """Stop after this many optimiser steps (None: time budget only)."""
+    minutes: float | None = None
+    """Stop after this much wall-clock time (None: step budget only)."""
+    ema: bool = True
+    """Keep an exponential moving average of the weights and return it as the trained policy."""
+    ema_power: float = 0.75
+    """EMA warm-up power: decay = 1 - (1 + step)^-power."""
+    ema_max_decay: float = 0.9999
+    """Cap of the EMA decay."""
+    grad_clip_norm: float | None = None
+    """Clip the gradient norm to this value (None: no clipping, as in Diffusion Policy)."""
+    seed: int = 0
+    """Seeds torch's global generator at the start (noise, timesteps, crops); batches are seeded by their batcher."""
+    num_threads: int | None = None
+    """torch.set_num_threads for the run (restored afterwards); None leaves it alone."""
+    checkpoint_every_minutes: float | None = 5.0
+    """Write the (EMA) policy to out_dir this often (None: only at the end)."""
+    log_every: int = 50
+    """Record mean loss / LR / throughput in the history every this many steps."""
+    progress: bool = True
+    """Show a tqdm progress bar."""
+
+    def __post_init__(self) -> None:
+        if self.max_steps is None and self.minutes is None:
+            raise ValueError("TrainConfig needs max_steps or minutes (or both); got neither")
+        if self.max_steps is not None and (not isinstance(self.max_steps, int) or self.max_steps < 1):
+            raise ValueError(f"max_steps must be a positive int or None, got {self.max_steps!r}")
+        if self.minutes is not None and not self.minutes > 0:
+            raise ValueError(f"minutes must be > 0 or None, got {self.minutes!r}")
+        if not self.lr > 0:
+            raise ValueError(f"lr must be > 0, got {self.lr!r}")
+        if self.lr_schedule not in LR_SCHEDULES:
+            raise ValueError(f"lr_schedule must be one of {LR_SCHEDULES}, got {self.lr_schedule!r}")
+        if not isinstance(self.warmup_steps, int) or self.warmup_steps < 0:
+            raise ValueError(f"warmup_steps must be an int >= 0, got {self.warmup_steps!r}")
+        if not isinstance(self.batch_size, int) or self.batch_size < 1:
+            raise ValueError(f"batch_size must be a positive int, got {self.batch_size!r}")
+        if not 0.0 <= self.ema_max_decay < 1.0 or not self.ema_power > 0:
+            raise ValueError(f"need 0 <= ema_max_decay < 1 and ema_power > 0, got {self.ema_max_decay!r}, {self.ema_power!r}")
+        if self.log_every < 1:
+            raise ValueError(f"log_every must be >= 1, got {self.log_every!r}")
+
+
+def lr_factor(step: int, warmup_steps: int, progress: float, schedule: str = "cosine") -> float:
+    """Multiplier of the peak LR at optimiser step ``step`` (0-based).
+
+    Warm-up: ``step / warmup_steps`` for step < warmup_steps. After it, ``progress`` in [0, 1] is the
+    fraction of the post-warm-up budget used: cosine gives ``0.5 (1 + cos(pi progress))``,
+    constant gives 1. With a step budget progress = (step - warmup) / (max_steps - warmup), which
+    equals diffusers' ``get_cosine_schedule_with_warmup``.
+    """
+    if step < warmup_steps:
+        return step / max(1, warmup_steps)
+    if schedule == "constant":
+        return 1.0
+    return max(0.0, 0.5 * (1.0 + math.cos(math.pi * min(max(progress, 0.0), 1.0))))
+
+
+def ema_decay(step: int, power: float = 0.75, max_decay: float = 0.9999) -> float:
+    """EMA decay after optimiser step ``step`` (0-based): min(max_decay, 1 - (1 + step)^-power).
+
+    Step 0 gives 0 (the average starts as a copy of the weights); the decay then rises towards
+    the cap, so early, poor weights are forgotten quickly (Diffusion Policy's EMAModel warm-up).
+    """
+    return min(max_decay, max(0.0, 1.0 - (1.0 + step) ** -power))
+
+
+class EMA:
+    """An exponential moving average copy of a module: ema <- decay * ema + (1 - decay) * weights."""
+
+    def __init__(self, model: torch.nn.Module, power: float = 0.75, max_decay: float = 0.9999):
+        self.model = copy.deepcopy(model).eval().requires_grad_(False)
+        self.power, self.max_decay = power, max_decay
+        self.decay = 0.0
+
+    @torch.no_grad()
+    def update(self, model: torch.nn.Module, step: int) -> None:
+        """Blend ``model``'s current weights in, with the decay of optimiser step ``step``."""
+        self.decay = ema_decay(step, self.power, self.max_decay)
+        ema_params = list(self.model.parameters())
+        params = [p.detach() for p in model.parameters()]
+        torch._foreach_lerp_(ema_params, params, 1.0 - self.decay)  # ema += (1 - decay) (p - ema)
+        for eb, b in zip(self.model.buffers(), model.buffers()):
+            eb.copy_(b)  # buffers (e.g. normalisation statistics) are copied, not averaged
+
+
+@dataclass
+class TrainResult:
+    """What a run produced.
+
+    Attributes:
+        policy: the policy to evaluate (the EMA copy when ``ema`` is on, else the trained one).
+        raw_policy: the optimised (non-averaged) policy.
+        history: one dict per ``log_every`` steps: step, seconds, lr, samples_per_s, mean of each loss key.
+        summary: steps, samples, seconds, samples_per_s, final_loss, config, ... (stored in checkpoints).
+    """
+
+    policy: Any
+    raw_policy: Any
+    history: list[dict[str, float]] = field(default_factory=list)
+    summary: dict[str, Any] = field(default_factory=dict)
+
+
+def make_optimizer(policy: torch.nn.Module, config: TrainConfig) -> torch.optim.Optimizer:
+    """AdamW over ``policy.optimizer_param_groups(lr, wd)`` if the policy defines it, else all parameters."""
+    groups = (policy.optimizer_param_groups(config.lr, config.weight_decay)
+              if hasattr(policy, "optimizer_param_groups") else [p for p in policy.parameters() if p.requires_grad])
+    return torch.optim.AdamW(groups, lr=config.lr, betas=config.betas, weight_decay=config.weight_decay)
+
+
+def train(policy: Any, batches: Iterable[dict[str, Any]], config: TrainConfig, out_dir: str | Path | None = None,
+          dataset_meta: dict[str, Any] | None = None,
+          callback: Callable[[int, dict[str, float]], None] | None = None) -> TrainResult:
+    """Train ``policy`` in place on ``batches`` (an endless iterable of batch dicts) under ``config``.
+
+    Args:
+        policy: a ChunkPolicy with fitted normalisers (``compute_loss(batch)["loss"]``).
+        batches: e.g. a :class:`coursekit.data.batches.WindowBatcher` (seeded on its own).
+        config: the :class:`TrainConfig`.
+        out_dir: if given, the (EMA) policy is checkpointed there periodically and at the end.
+        dataset_meta: stored in the checkpoint beside the training summary.
+        callback: called as ``callback(step, logged_row)`` at every history row.
+    """
+    from coursekit.checkpoint import save_checkpoint
+
+    threads_before = torch.get_num_threads()
+    if config.num_threads is not None:
+        torch.set_num_threads(config.num_threads)
+    threads_used = torch.get_num_threads()
+    torch.manual_seed(config.seed)
+    policy.train()
+    optimizer = make_optimizer(policy, config)
+    base_lrs = [g["lr"] for g in optimizer.param_groups]
+    ema = EMA(policy, config.ema_power, config.ema_max_decay) if config.ema else None
+    budget_s = None if config.minutes is None else 60.0 * config.minutes
+    history: list[dict[str, float]] = []
+    sums: dict[str, float] = {}
+    step, n_logged, last_loss = 0, 0, float("nan")
+    start = last_ckpt = last_log_t = time.perf_counter()
+    warm_end_t: float | None = None
+    bar_total = config.max_steps if config.max_steps is not None else int(budget_s)
+    bar = tqdm(total=bar_total, unit="step" if config.max_steps is not None else "s", disable=not config.progress,
+               desc=f"train {getattr(policy, 'policy_type', '')}".strip(), dynamic_ncols=True)
+
+    def summary(seconds: float) -> dict[str, Any]:
+        return {"steps": step, "samples": step * config.batch_size, "seconds": round(seconds, 2),
+                "samples_per_s": round(step * config.batch_size / max(seconds, 1e-9), 1),
+                "final_loss": last_loss, "ema_decay": ema.decay if ema else None,
+                "train_config": config_to_dict(config), "torch_threads": threads_used,
+                "device": str(next(policy.parameters()).device)}
+
+    try:
+        batch_iter = iter(batches)
+        while True:
+            now = time.perf_counter()
+            elapsed = now - start
+            if config.max_steps is not None and step >= config.max_steps:
+                break
+            if budget_s is not None and elapsed >= budget_s:
+                break
+            # LR for this step: warm-up by steps, then cosine over the budget used so far.
+            if step >= config.warmup_steps and warm_end_t is None:
+                warm_end_t = now
+            progress = 0.0
+            if config.max_steps is not None:
+                progress = (step - config.warmup_steps) / max(1, config.max_steps - config.warmup_steps)
+            if budget_s is not None and warm_end_t is not None:
+                remaining = max(1e-9, budget_s - (warm_end_t - start))
+                progress = max(progress, (now - warm_end_t) / remaining)
+            factor = lr_factor(step, config.warmup_steps, progress, config.lr_schedule)
+            for g, base in zip(optimizer.param_groups, base_lrs):
+                g["lr"] = base * factor
+
+            out = policy.compute_loss(next(batch_iter))
+            loss = out["loss"]
+            if not torch.isfinite(loss):
+                raise ValueError(f"training loss became {loss.item()} at step {step}; check the data and the LR ({config.lr})")
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            if config.grad_clip_norm is not None:
+                torch.nn.utils.clip_grad_norm_(policy.parameters(), config.grad_clip_norm)
+            optimizer.step()
+            if ema is not None:
+                ema.update(policy, step)
+            step += 1
+            last_loss = float(loss.detach())
+            for k, v in out.items():
+                sums[k] = sums.get(k, 0.0) + float(v.detach() if torch.is_tensor(v) else v)
+            n_logged += 1
+
+            now = time.perf_counter()
+            if step % config.log_every == 0 or (config.max_steps is not None and step == config.max_steps):
+                row = {"step": step, "seconds": round(now - start, 3), "lr": base_lrs[0] * factor,
+                       "samples_per_s": n_logged * config.batch_size / max(now - last_log_t, 1e-9),
+                       **{k: v / n_logged for k, v in sums.items()}}
+                history.append(row)
+                sums, n_logged, last_log_t = {}, 0, now
+                bar.set_postfix(loss=f"{row['loss']:.4f}", lr=f"{row['lr']:.1e}", sps=f"{row['samples_per_s']:.0f}")
+                if callback is not None:
+                    callback(step, row)
+            bar.update(1 if config.max_steps is not None else int(now - start) - bar.n)
+            if (out_dir is not None and config.checkpoint_every_minutes is not None
+                    and now - last_ckpt >= 60.0 * config.checkpoint_every_minutes):
+                save_checkpoint(ema.model if ema else policy, out_dir, dataset_meta=dataset_meta,
+                                training={**summary(now - start), "complete": False})
+                last_ckpt = time.perf_counter()
+    finally:
+        bar.close()
+        if config.num_threads is not None:
+            torch.set_num_threads(threads_before)
+
+    seconds = time.perf_counter() - start
+    final = ema.model if ema else policy
+    final.eval()
+    result = TrainResult(policy=final, raw_policy=policy, history=history,
+                         summary={**summary(seconds), "complete": True})
+    if out_dir is not None:
+        save_checkpoint(final, out_dir, dataset_meta=dataset_meta, training=result.summary)
+    return result
