@@ -96,7 +96,16 @@ class TemporalEnsemble:
         return self._history
 
     def act(self, obs: Any) -> np.ndarray:
-        """One control step: predict a new chunk, return the ensembled action (B, Da) for time t."""
+        """One control step at time t = self.t: predict a chunk, return the ensembled action (B, Da).
+
+        Steps: (1) store the new chunk (B, Tp, Da) from ``self.start`` on, with the step t it was
+        made at, in ``self._chunks`` (a list of (s, chunk) pairs, oldest first); (2) forget chunks
+        that no longer reach t (a chunk c made at s covers s .. s + len(c) - 1); (3) the
+        prediction of chunk (s, c) for time t is ``c[:, t - s]``; with n of them, oldest first,
+        weights w_i = exp(-m i) for i = 0 .. n-1 (m = ``self.ensemble_decay``; i counted from the
+        NEWEST when ``self.newest_first``), normalised to sum to 1; (4) the action is
+        sum_i w_i * pred_i, shape (B, Da). ``self.t`` is advanced after your block.
+        """
         history = self._observe(obs)
         chunk = _to_numpy(self.predict_chunk(history))  # (B, Tp, Da)
         if chunk.ndim != 3 or chunk.shape[0] != history.shape[0] or chunk.shape[1] <= self.start:

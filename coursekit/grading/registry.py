@@ -75,6 +75,35 @@ EXERCISES: tuple[Exercise, ...] = (
             "test_matches_library_on_random_datasets": (1, "Episodes in order, window starts increasing; compare with SequenceWindows on small cases."),
         },
     ),
+    Exercise(
+        id="kl",
+        chapter=7,
+        title="The KL of a diagonal Gaussian to N(0, I) (ACT's CVAE regulariser)",
+        source="coursekit.nn.kl",
+        objects=("gaussian_kl",),
+        tests={
+            "test_returns_a_scalar": (1, "Return one scalar tensor: sum over latent dims, then mean over the batch."),
+            "test_zero_at_the_prior": (1, "mu = 0 and logvar = 0 is the prior itself: the KL is exactly 0."),
+            "test_matches_torch_distributions": (3, "KL = 1/2 * sum_j (mu_j^2 + exp(logvar_j) - logvar_j - 1); sigma^2 = exp(logvar)."),
+            "test_sum_over_latent_mean_over_batch": (2, "Sum over the latent dimension (dim 1), then average over the batch (dim 0)."),
+            "test_gradients_match": (1, "Use torch operations only (no .item(), no numpy) so gradients flow to mu and logvar."),
+        },
+    ),
+    Exercise(
+        id="temporal_ensembling",
+        chapter=8,
+        title="Temporal ensembling of overlapping action chunks (ACT)",
+        source="coursekit.execution.ensembling",
+        objects=("TemporalEnsemble",),
+        tests={
+            "test_first_step_is_the_first_chunk": (1, "At t = 0 only the first chunk covers t: return chunk[:, start] with shape (B, Da)."),
+            "test_plain_mean_when_m_is_zero": (2, "With m = 0 every weight is 1: average chunk_s[t - s] over all stored chunks covering t."),
+            "test_oldest_first_weights": (2, "w_i = exp(-m i) with i = 0 the OLDEST chunk covering t; divide by the sum of the weights."),
+            "test_newest_first_weights": (2, "With newest_first=True count i from the NEWEST chunk (reverse the order before weighting)."),
+            "test_old_chunks_expire": (1, "A chunk of length L made at step s covers s .. s+L-1: drop it once t - s >= L."),
+            "test_start_offset_for_diffusion_policy": (1, "Store chunk[:, self.start:] so index 0 of a stored chunk is the step it was made at."),
+        },
+    ),
 )
 
 

@@ -27,14 +27,17 @@ def gaussian_kl(mu: torch.Tensor, logvar: torch.Tensor) -> torch.Tensor:
         logvar: (B, d) posterior log-variances, log sigma^2.
 
     Returns:
-        () scalar tensor: (1/B) * sum_b 1/2 * sum_j (mu_bj^2 + exp(logvar_bj) - logvar_bj - 1).
+        kl: () scalar tensor, (1/B) * sum_b 1/2 * sum_j (mu_bj^2 + exp(logvar_bj) - logvar_bj - 1).
+
+    Keep it differentiable (torch operations only): ACT back-propagates beta * kl into the encoder.
     """
     if mu.shape != logvar.shape or mu.dim() != 2:
         raise ValueError(f"gaussian_kl expects mu and logvar of one shape (B, d), got {tuple(mu.shape)} and {tuple(logvar.shape)}")
     # BEGIN SOLUTION
     per_dim = 0.5 * (mu.pow(2) + logvar.exp() - logvar - 1.0)  # (B, d)
-    return per_dim.sum(dim=1).mean()
+    kl = per_dim.sum(dim=1).mean()
     # END SOLUTION
+    return kl
 
 
 def gaussian_kl_per_dim(mu: torch.Tensor, logvar: torch.Tensor) -> torch.Tensor:
