@@ -85,3 +85,50 @@ def test_bad_render_input():
         pr.render_state([1.0, 2.0, np.nan, 4.0, 5.0])
     with pytest.raises(ValueError, match="size"):
         pr.PushTRenderer((96,))
+
+
+# ------------------------------------------------------------------------------------------
+# matplotlib figures (coursekit.viz.pusht_plots)
+# ------------------------------------------------------------------------------------------
+def test_draw_scene_places_patches_from_geometry():
+    from matplotlib.figure import Figure
+
+    from coursekit.viz import pusht_plots as pp
+
+    ax = Figure().add_subplot()
+    art = pp.draw_scene(ax, STATE, target=(10.0, 20.0))
+    np.testing.assert_allclose(art.block.get_xy()[:8], geo.block_outline(STATE[2:5]))
+    assert art.agent.center == (80.0, 430.0) and art.agent.radius == geo.AGENT_RADIUS
+    assert ax.get_ylim() == (512.0, 0.0)  # y down like the images
+    moved = STATE + [5, 5, 10, -10, 0.3]
+    art.update(moved, target=None)
+    np.testing.assert_allclose(art.block.get_xy()[:8], geo.block_outline(moved[2:5]))
+
+
+def test_rollout_animation_and_html():
+    from coursekit.viz import pusht_plots as pp
+
+    states = np.array([STATE + [i, 0, 0, 0, 0.05 * i] for i in range(5)])
+    html = pp.rollout_jshtml(states, actions=states[:, :2], coverage=np.linspace(0, 1, 5), stride=2)
+    assert "<script" in html and html.count("data:image/png;base64") == 3  # frames 0, 2, 4
+    # the final state is always shown, even when the stride skips it
+    assert pp.rollout_jshtml(states, stride=3).count("data:image/png;base64") == 3  # 0, 3, 4
+    with pytest.raises(ValueError, match="coverage"):
+        pp.animate_rollout(states, coverage=np.zeros(3))
+
+
+def test_coverage_and_trajectory_figures():
+    from coursekit.viz import pusht_plots as pp
+
+    c = np.array([0.0, 0.3, 0.96])
+    fig = pp.plot_coverage(c)
+    ax = fig.axes[0]
+    np.testing.assert_array_equal(ax.lines[0].get_ydata(), c)
+    assert ax.lines[1].get_ydata()[0] == pytest.approx(0.95)
+    paths = [np.array([[10.0, 10.0], [50.0, 60.0]]), np.array([[10.0, 10.0], [90.0, 20.0]])]
+    fig = pp.plot_trajectories(paths, scene_state=STATE, labels=["cw", "ccw"])
+    lines = [ln for ln in fig.axes[0].lines if len(ln.get_xdata()) == 2]
+    assert len(lines) == 2
+    assert [t.get_text() for t in fig.axes[0].get_legend().get_texts()] == ["cw", "ccw"]
+    with pytest.raises(ValueError, match="labels"):
+        pp.plot_trajectories(paths, labels=["one"])
