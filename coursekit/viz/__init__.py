@@ -1,0 +1,43 @@
+"""Seeing the worlds: matplotlib figures, meshcat 3-D scenes exported as HTML, browser checks.
+
+Everything here loads lazily: ``import coursekit.viz`` imports neither meshcat nor mujoco; a
+name below pulls its module (and that module's heavy imports) on first use.
+
+    MeshcatScene, shared_scene          one meshcat server per process, closed cleanly  (meshcat_scene)
+    PushTMeshcat, export_pusht_rollout  PushT in 3-D, rollouts as animations            (meshcat_pusht)
+    MujocoMeshcat, export_mujoco_rollout  any MuJoCo model in meshcat                   (mujoco_meshcat)
+    show_html                           an exported page inline in a notebook          (notebook)
+    screenshot_html, find_chromium      headless-chromium screenshots                  (browser)
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+from typing import Any
+
+_LAZY = {
+    "MeshcatScene": "coursekit.viz.meshcat_scene",
+    "shared_scene": "coursekit.viz.meshcat_scene",
+    "PushTMeshcat": "coursekit.viz.meshcat_pusht",
+    "export_pusht_rollout": "coursekit.viz.meshcat_pusht",
+    "MujocoMeshcat": "coursekit.viz.mujoco_meshcat",
+    "export_mujoco_rollout": "coursekit.viz.mujoco_meshcat",
+    "show_html": "coursekit.viz.notebook",
+    "screenshot_html": "coursekit.viz.browser",
+    "find_chromium": "coursekit.viz.browser",
+    "ChromiumNotFoundError": "coursekit.viz.browser",
+}
+__all__ = sorted(_LAZY)
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    if not name.startswith("_") and importlib.util.find_spec(f"{__name__}.{name}") is not None:
+        return importlib.import_module(f"{__name__}.{name}")  # a submodule, e.g. coursekit.viz.pusht_plots
+    raise AttributeError(f"module 'coursekit.viz' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return __all__
