@@ -36,11 +36,16 @@ def q_sample(x0: torch.Tensor, t: torch.Tensor, noise: torch.Tensor,
     Returns:
         x_t, same shape as x0. ``abar_t`` is picked per sample and broadcast over the other dims.
     """
+    if x0.shape != noise.shape:
+        raise ValueError(f"noise shape {tuple(noise.shape)} must equal x0 shape {tuple(x0.shape)}")
+    if t.shape != x0.shape[:1]:
+        raise ValueError(f"t must have shape ({x0.shape[0]},) (one timestep per sample), got {tuple(t.shape)}")
     # BEGIN SOLUTION
     abar = alphas_cumprod.to(device=x0.device, dtype=x0.dtype)[t]  # (B,)
     abar = abar.reshape(-1, *([1] * (x0.ndim - 1)))  # (B, 1, ..., 1)
-    return abar.sqrt() * x0 + (1.0 - abar).sqrt() * noise
+    x_t = abar.sqrt() * x0 + (1.0 - abar).sqrt() * noise
     # END SOLUTION
+    return x_t
 
 
 def epsilon_loss(eps_model: EpsModel, x0: torch.Tensor, cond: Any, t: torch.Tensor, noise: torch.Tensor,
@@ -66,8 +71,9 @@ def epsilon_loss(eps_model: EpsModel, x0: torch.Tensor, cond: Any, t: torch.Tens
     # BEGIN SOLUTION
     x_t = q_sample_fn(x0, t, noise, alphas_cumprod)
     eps_hat = eps_model(x_t, t, cond)
-    return F.mse_loss(eps_hat, noise)
+    loss = F.mse_loss(eps_hat, noise)
     # END SOLUTION
+    return loss
 
 
 def diffusion_loss(eps_model: EpsModel, x0: torch.Tensor, cond: Any, schedule: NoiseSchedule,

@@ -50,8 +50,8 @@ def ddim_step(eps: torch.Tensor, x_t: torch.Tensor, abar_t: Scalar, abar_prev: S
     Args:
         eps: predicted noise, (B, ...).
         x_t: current sample, (B, ...).
-        abar_t: alpha-bar at the current timestep (python float or 0-d tensor).
-        abar_prev: alpha-bar at the previous timestep, 1.0 past the last step.
+        abar_t: alpha-bar at the current timestep (converted here to a 0-d tensor like x_t).
+        abar_prev: alpha-bar at the previous timestep, 1.0 past the last step (also a 0-d tensor).
         eta: stochasticity, >= 0.
         noise: standard normal, like x_t; required when eta > 0, ignored when eta == 0.
         clip_sample: clamp x0_hat to [-clip_sample_range, clip_sample_range].
@@ -60,21 +60,20 @@ def ddim_step(eps: torch.Tensor, x_t: torch.Tensor, abar_t: Scalar, abar_prev: S
     Returns:
         x_prev, same shape as x_t.
     """
-    # BEGIN SOLUTION
+    if eta > 0 and (noise is None or noise.shape != x_t.shape):
+        raise ValueError(f"ddim_step with eta={eta} > 0 needs `noise` shaped like x_t {tuple(x_t.shape)}")
     abar_t = torch.as_tensor(abar_t, dtype=x_t.dtype, device=x_t.device)
     abar_prev = torch.as_tensor(abar_prev, dtype=x_t.dtype, device=x_t.device)
+    # BEGIN SOLUTION
     x0_hat = (x_t - (1.0 - abar_t).sqrt() * eps) / abar_t.sqrt()
     if clip_sample:
         x0_hat = x0_hat.clamp(-clip_sample_range, clip_sample_range)
-    variance = (1.0 - abar_prev) / (1.0 - abar_t) * (1.0 - abar_t / abar_prev)
-    sigma = eta * variance.sqrt()
+    sigma = eta * ((1.0 - abar_prev) / (1.0 - abar_t) * (1.0 - abar_t / abar_prev)).sqrt()
     x_prev = abar_prev.sqrt() * x0_hat + (1.0 - abar_prev - sigma ** 2).sqrt() * eps
     if eta > 0:
-        if noise is None:
-            raise ValueError("ddim_step with eta > 0 needs `noise` (standard normal, like x_t)")
         x_prev = x_prev + sigma * noise
-    return x_prev
     # END SOLUTION
+    return x_prev
 
 
 def ddpm_step(eps: torch.Tensor, x_t: torch.Tensor, abar_t: Scalar, abar_prev: Scalar,

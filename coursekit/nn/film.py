@@ -23,6 +23,10 @@ class FiLM(nn.Module):
         scale = e[:, :channels],  bias = e[:, channels:]                     # (B, C) each
         out   = scale[:, :, None] * h + bias[:, :, None]                     # (B, C, L)
 
+    ``__init__`` must create exactly one layer, ``self.linear = nn.Linear(cond_dim, 2 * channels)``
+    (its first ``channels`` outputs are the scales, the last ``channels`` the biases); ``forward``
+    applies Mish to ``cond`` (``F.mish``), then ``self.linear``, then the affine map above.
+
     Args:
         cond_dim: size of the condition vector.
         channels: C, the number of feature channels to modulate.
@@ -48,5 +52,6 @@ class FiLM(nn.Module):
         # BEGIN SOLUTION
         e = self.linear(F.mish(cond))  # (B, 2C)
         scale, bias = e[:, : self.channels], e[:, self.channels:]  # (B, C) each
-        return scale.unsqueeze(-1) * h + bias.unsqueeze(-1)  # (B, C, L)
+        out = scale.unsqueeze(-1) * h + bias.unsqueeze(-1)  # (B, C, L)
         # END SOLUTION
+        return out
