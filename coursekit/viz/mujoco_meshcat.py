@@ -215,7 +215,12 @@ class MujocoMeshcat:
 
     # -- poses ---------------------------------------------------------------------------------
     def show(self, data: mujoco.MjData) -> None:
-        """Stream one frame: move every moving geom to its pose in ``data`` (run mj_forward first)."""
+        """Stream one frame: move every moving geom to its pose in ``data``.
+
+        ``mj_step`` computes positions BEFORE it integrates, so right after a step ``geom_xpos``
+        lags ``qpos`` by one physics step; call ``mujoco.mj_kinematics`` (or ``mj_forward``) first
+        when the exact current pose matters.
+        """
         top = self.scene.vis[self.root]
         for i in self.moving_ids:
             top[self._paths[i]].set_transform(pose_matrix(data.geom_xpos[i], data.geom_xmat[i]))
@@ -238,7 +243,8 @@ class MujocoMeshcat:
         """Record a rollout from per-step geom poses and load it in the scene as an animation.
 
         Args:
-            geom_xpos: (T, ngeom, 3) stacked copies of ``data.geom_xpos``.
+            geom_xpos: (T, ngeom, 3) stacked copies of ``data.geom_xpos`` (see :meth:`show` on
+                their one-physics-step lag after ``mj_step``).
             geom_xmat: (T, ngeom, 9) stacked copies of ``data.geom_xmat``.
             fps: playback rate (ALOHA's control rate is 50 Hz; pass a stride-adjusted rate if you
                 keep every k-th step).
