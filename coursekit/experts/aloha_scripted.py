@@ -27,13 +27,14 @@ Dataset arrays (per control step, episodes concatenated; see ``coursekit.data.Ep
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 from tqdm.auto import tqdm
 
 from coursekit.data import EpisodeDataset
 from coursekit.envs.aloha.env import AlohaEnv
+from coursekit.envs.aloha.model import STATE_NAMES
 from coursekit.experts.aloha_waypoints import EndEffectorScene, Waypoint, interpolate, quat_axis_angle, quat_mul
 
 EPISODE_STEPS = 400
@@ -63,6 +64,18 @@ class ScriptConfig:
     """Left gripper opening while it approaches the cube (normalised)."""
     release_start: int = 310
     """Step at which the right gripper starts to open (it is fully open 20 steps later)."""
+    insert_pitch_deg: float = 60.0
+    """Downward pitch of both grippers in the insertion task (degrees)."""
+    peg_grasp_height: float = 0.008
+    """Insertion: grasp point above the peg centre (m)."""
+    socket_grasp_height: float = 0.008
+    """Insertion: grasp point above the socket centre (m)."""
+    insert_close: float = -0.213
+    """Insertion: gripper close command (normalised; -0.213 = fingers driven to 0.010 m)."""
+    insert_meet_xyz: tuple[float, float, float] = (0.0, 0.5, 0.15)
+    """Insertion: the socket's grasp site goes to meet_x - 0.045 at this height (m)."""
+    insert_push: float = 0.005
+    """Insertion: how far the plan drives the peg tip past the pin's end (m)."""
 
     def __post_init__(self) -> None:
         if not 0.0 < self.pick_pitch_deg < 90.0:
@@ -107,6 +120,63 @@ def transfer_cube_plan(env_state: np.ndarray, start: list[tuple[np.ndarray, np.n
     return left, right
 
 
+def insertion_plan(env_state: np.ndarray, start: list[tuple[np.ndarray, np.ndarray]],
+                   cfg: ScriptConfig = ScriptConfig(),
+                   held: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[list[Waypoint], list[Waypoint]]:
+    """Waypoints (left, right) for insertion, from the peg + socket poses (14,) and the start poses.
+
+    Both hands pick from above (pads on the objects' +-y faces) and lift; then the peg's axis is
+    put on the socket's axis and the right hand pushes the peg in until its tip meets the pin
+    (socket-frame x = +0.02, i.e. 4 cm deep). ``held`` = (socket centre - left grasp site, peg
+    centre - right grasp site) in world coordinates, measured once both objects are lifted
+    (step ``INSERTION_REPLAN_STEP``): the meeting targets correct for where each object really
+    sits in its gripper. This feedback is a deliberate departure from ACT's open-loop script,
+    whose fixed offsets ("lift_right = 0.00715") are tuned to one model.
+    """
+    peg, socket = np.asarray(env_state[:3]), np.asarray(env_state[7:10])
+    (l0, lq0), (r0, rq0) = start
+    up = np.array([0.0, 0.0, 1.0])
+    pick_r = _pitch_down(_YAW_PI, cfg.insert_pitch_deg)
+    pick_l = _pitch_down(np.array([1.0, 0, 0, 0]), cfg.insert_pitch_deg)
+    g_close = cfg.insert_close
+    peg_grip = peg + cfg.peg_grasp_height * up
+    socket_grip = socket + cfg.socket_grasp_height * up
+    off_socket, off_peg = held if held is not None else (-cfg.socket_grasp_height * up, -cfg.peg_grasp_height * up)
+    meet = np.asarray(cfg.insert_meet_xyz)
+    # The socket's centre goes to meet - 4.5 cm in x; the peg's centre onto the socket's axis,
+    # 6 cm (half a peg) beyond the pin's end (socket-frame x = +0.02), pushed in by insert_push.
+    socket_target = meet + np.array([-0.045, 0, 0])
+    peg_target = socket_target + np.array([0.02 + 0.06 - cfg.insert_push, 0, 0])
+    left_final = socket_target - off_socket
+    right_final = peg_target - off_peg
+    right_ready = right_final + np.array([0.06, 0, 0])  # peg tip 1 cm before the socket's mouth
+    t_lift = INSERTION_REPLAN_STEP
+    left = [
+        Waypoint(0, tuple(l0), tuple(lq0), 0.0),
+        Waypoint(120, tuple(socket_grip + 0.08 * up), pick_l, 1.0),  # above the socket
+        Waypoint(170, tuple(socket_grip), pick_l, 1.0),  # down
+        Waypoint(220, tuple(socket_grip), pick_l, g_close),  # close (firmly)
+        Waypoint(t_lift, tuple(socket_grip + 0.06 * up), pick_l, g_close),  # lift
+        Waypoint(285, tuple(left_final), pick_l, g_close),  # to the meeting point
+        Waypoint(EPISODE_STEPS, tuple(left_final), pick_l, g_close),
+    ]
+    right = [
+        Waypoint(0, tuple(r0), tuple(rq0), 0.0),
+        Waypoint(120, tuple(peg_grip + 0.08 * up), pick_r, 1.0),
+        Waypoint(170, tuple(peg_grip), pick_r, 1.0),
+        Waypoint(220, tuple(peg_grip), pick_r, g_close),
+        Waypoint(t_lift, tuple(peg_grip + 0.06 * up), pick_r, g_close),
+        Waypoint(285, tuple(right_ready), pick_r, g_close),  # line up with the socket
+        Waypoint(340, tuple(right_final), pick_r, g_close),  # insert
+        Waypoint(EPISODE_STEPS, tuple(right_final), pick_r, g_close),
+    ]
+    return left, right
+
+
+INSERTION_REPLAN_STEP = 250
+"""Step at which the insertion expert measures how the objects sit in the grippers."""
+
+
 def run_end_effector(task: str, env_state: np.ndarray, plan_fn, cfg: ScriptConfig = ScriptConfig(),
                      scene: EndEffectorScene | None = None) -> dict[str, np.ndarray]:
     """Execute a waypoint plan in the end-effector scene.
@@ -120,6 +190,8 @@ def run_end_effector(task: str, env_state: np.ndarray, plan_fn, cfg: ScriptConfi
     qpos = [scene.qpos14()]
     grip, stage, err = [], [], []
     for t in range(EPISODE_STEPS):
+        if task == "insertion" and t == INSERTION_REPLAN_STEP:
+            left, right = plan_fn(env_state, start, cfg, held=scene.held_offsets(("socket", "peg")))
         lc, rc = interpolate(left, t + 1), interpolate(right, t + 1)  # aim at the next step's pose
         scene.step(lc, rc)
         qpos.append(scene.qpos14())
@@ -159,3 +231,73 @@ def replay(env: AlohaEnv, env_state: np.ndarray, actions: np.ndarray) -> dict[st
     episode["strict_success"] = np.array(bool(info.get("strict_success", False)) and not info.get("sim_unstable", False))
     episode["lenient_success"] = np.array(int(info.get("max_stage", 0)) == 4)
     return episode
+
+
+# ---- demonstrations ------------------------------------------------------------------------
+PLANS = {"transfer_cube": transfer_cube_plan, "insertion": insertion_plan}
+"""Task name -> waypoint planner."""
+ENV_IDS = {"transfer_cube": "coursekit/AlohaTransferCube-v0", "insertion": "coursekit/AlohaInsertion-v0"}
+"""Task name -> gymnasium id of the joint-space environment."""
+
+
+def scripted_episode(task: str, seed: int, cfg: ScriptConfig = ScriptConfig(), env: AlohaEnv | None = None,
+                     scene: EndEffectorScene | None = None) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """One scripted demonstration: spawn by ``seed``, plan, run in the mocap scene, replay.
+
+    Returns (replayed episode, end-effector rollout); see ``replay`` and ``run_end_effector``.
+    """
+    if task not in PLANS:
+        raise ValueError(f"unknown ALOHA task {task!r}; expected one of {sorted(PLANS)}")
+    env = env or AlohaEnv(task)
+    env.reset(seed=seed)
+    env_state = env.task.env_state(env.data)
+    ee = run_end_effector(task, env_state, PLANS[task], cfg, scene=scene)
+    return replay(env, env_state, joint_actions(ee)), ee
+
+
+def collect(task: str, n_episodes: int, seed: int = 0, progress: bool = True, cfg: ScriptConfig = ScriptConfig(),
+            max_attempts: int | None = None) -> EpisodeDataset:
+    """``n_episodes`` strictly successful scripted demonstrations of ``task`` as a dataset.
+
+    Attempt ``i`` uses spawn seed ``seed + i``; failed replays are skipped (their seeds are listed
+    in ``meta["failed_seeds"]``) until ``n_episodes`` are kept or ``max_attempts`` (default
+    2 * n_episodes + 10) is reached, which raises RuntimeError. Deterministic in ``seed``.
+    """
+    if n_episodes < 1:
+        raise ValueError(f"n_episodes must be >= 1, got {n_episodes}")
+    max_attempts = max_attempts or 2 * n_episodes + 10
+    env, scene = AlohaEnv(task), EndEffectorScene(task)
+    kept, kept_seeds, failed_seeds, lenient = [], [], [], 0
+    bar = tqdm(total=n_episodes, desc=f"aloha {task} demos", disable=not progress, unit="ep")
+    attempt = 0
+    while len(kept) < n_episodes:
+        if attempt >= max_attempts:
+            raise RuntimeError(f"only {len(kept)} of {n_episodes} {task} demonstrations succeeded in {max_attempts} attempts")
+        episode, _ = scripted_episode(task, seed + attempt, cfg, env, scene)
+        lenient += int(episode.pop("lenient_success"))
+        if bool(episode.pop("strict_success")):
+            kept.append(episode)
+            kept_seeds.append(seed + attempt)
+            bar.update(1)
+        else:
+            failed_seeds.append(seed + attempt)
+        attempt += 1
+    bar.close()
+    env.close()
+    meta = {
+        "env_id": ENV_IDS[task], "task": task, "obs_type": "state", "expert": "aloha_scripted (mocap waypoints, joint replay)",
+        "seed": seed, "n_episodes": n_episodes, "attempts": attempt, "episode_seeds": kept_seeds,
+        "failed_seeds": failed_seeds, "strict_successes": attempt - len(failed_seeds), "lenient_successes": lenient,
+        "state_names": list(STATE_NAMES), "control_hz": 50, "script_config": asdict(cfg),
+    }
+    return EpisodeDataset.from_episodes(kept, meta)
+
+
+def collect_transfer_cube(n_episodes: int, seed: int = 0, progress: bool = True) -> EpisodeDataset:
+    """Scripted transfer-cube demonstrations (``coursekit collect aloha-cube``)."""
+    return collect("transfer_cube", n_episodes, seed, progress)
+
+
+def collect_insertion(n_episodes: int, seed: int = 0, progress: bool = True) -> EpisodeDataset:
+    """Scripted insertion demonstrations (``coursekit collect aloha-insertion``)."""
+    return collect("insertion", n_episodes, seed, progress)

@@ -137,6 +137,12 @@ class EndEffectorScene:
         """(14,) current joint angles and normalised gripper positions."""
         return self.index.qpos14(self.data)
 
+    def held_offsets(self, bodies: tuple[str, str]) -> tuple[np.ndarray, np.ndarray]:
+        """World offsets (3,) of two bodies' origins from the (left, right) grasp sites."""
+        ids = [mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, b) for b in bodies]
+        left, right = (self.data.xpos[b] - self.data.site_xpos[s] for b, s in zip(ids, self.index.grasp_site))
+        return left.copy(), right.copy()
+
     def site_error(self) -> float:
         """Largest distance (m) between a grasp site and its mocap target (weld tracking error)."""
         errs = [np.linalg.norm(self.data.site_xpos[site] - self.data.mocap_pos[self.mocap[arm]])

@@ -147,7 +147,7 @@ class AlohaEnv(gymnasium.Env):
         stage = self.task.stage(self.data)
         self._max_stage = max(self._max_stage, stage)
         truncated = self._t >= self.max_episode_steps
-        return self._obs(), float(stage), unstable, truncated and not unstable, self._info(unstable)
+        return self._obs(), float(stage), unstable, truncated and not unstable, self._info(unstable, stage)
 
     def render(self) -> np.ndarray | None:
         if self.render_mode != "rgb_array":
@@ -215,9 +215,9 @@ class AlohaEnv(gymnasium.Env):
             obs["pixels"] = self.render_camera("top")
         return obs
 
-    def _info(self, unstable: bool) -> dict[str, Any]:
+    def _info(self, unstable: bool, stage: int | None = None) -> dict[str, Any]:
         return {
-            "stage": self.task.stage(self.data),
+            "stage": self.task.stage(self.data) if stage is None else stage,
             "max_stage": self._max_stage,
             "is_success": self._max_stage == 4,
             "strict_success": self.task.strict_success(self.data),
