@@ -31,7 +31,8 @@ def _tail(text: str, limit: int = MAX_TEXT) -> str:
 
 
 def _first_line(text: str, limit: int = 300) -> str:
-    line = next((ln for ln in text.strip().splitlines() if ln.strip()), "")
+    """The first few non-empty lines joined into one (numpy's messages start with a bare "AssertionError:")."""
+    line = " ".join(ln.strip() for ln in text.strip().splitlines() if ln.strip())
     return line if len(line) <= limit else line[:limit] + "..."
 
 
@@ -66,6 +67,7 @@ class ReportPlugin:
         self.snapshot: dict[str, dict[str, int]] = {}
         self.tampered = ""
         self.names: dict[str, str] = {}
+        self.errors: dict[tuple[str, str], str] = {}
 
     # -- collection: the test functions exist before any student code runs
     def pytest_collection_finish(self, session) -> None:
@@ -99,6 +101,12 @@ class ReportPlugin:
                     return self.tampered
         return ""
 
+    def pytest_runtest_makereport(self, item, call) -> None:
+        """Remember "ExceptionType: message" of a failing phase (returns None: pytest builds the report)."""
+        if call.excinfo is not None:
+            exc = call.excinfo.value
+            self.errors[(item.nodeid, call.when)] = f"{type(exc).__name__}: {exc}"
+
     def pytest_runtest_logstart(self, nodeid, location) -> None:
         self.channel.send(event="start", test=self.names.get(nodeid, nodeid))
 
@@ -111,7 +119,7 @@ class ReportPlugin:
                 text = str(report.longrepr) if report.longrepr is not None else ""
                 if report.skipped and isinstance(report.longrepr, tuple):
                     text = str(report.longrepr[2])
-                message = crash.message if crash is not None else text
+                message = self.errors.get((report.nodeid, report.when)) or (crash.message if crash is not None else text)
                 if report.when == "setup":
                     message = f"could not set up the test: {_first_line(message)}"
                 state["message"] = _first_line(message)

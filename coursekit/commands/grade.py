@@ -1,0 +1,38 @@
+"""``coursekit grade SUBMISSIONS_DIR --out DIR``: grade every submission in a sandboxed subprocess."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+HELP = "grade a folder of submissions (copies or zips of exercises/): class CSV, Gradescope JSON, feedback"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("submissions", type=Path, help="folder with one sub-folder or .zip per student")
+    parser.add_argument("--out", type=Path, required=True, help="where grades.csv and <student>/results.json, feedback.md go")
+    parser.add_argument("--exercise", action="append", default=None, metavar="ID",
+                        help="grade only this exercise (repeatable; default: all registered)")
+    parser.add_argument("--jobs", type=int, default=1, help="submissions graded in parallel (one subprocess each)")
+    parser.add_argument("--timeout", type=float, default=120.0, help="wall-clock limit per student x exercise, seconds")
+    parser.add_argument("--test-timeout", type=float, default=10.0, help="limit per test, seconds")
+    parser.add_argument("--memory-mb", type=int, default=3072, help="address-space cap per subprocess, MiB")
+    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+
+
+def run(args: argparse.Namespace) -> int:
+    from coursekit.grading.grade import grade_submissions
+    from coursekit.grading.runner import Limits
+
+    limits = Limits(timeout_s=args.timeout, test_timeout_s=args.test_timeout, memory_mb=args.memory_mb)
+    summary = grade_submissions(args.submissions, args.out, args.exercise, jobs=args.jobs, limits=limits,
+                                progress=not args.no_progress)
+    max_total = sum(e.max_points for e in summary.exercises)
+    for student in sorted(summary.students, key=lambda s: s.student):
+        notes = [f"{g.exercise.id}: {g.status}" for g in student.grades if g.status != "ok"]
+        print(f"{student.student:<24} {student.points:>6g} / {max_total:g}  {'; '.join(notes)}")
+    for warning in summary.warnings:
+        print(f"WARNING: {warning}")
+    print(f"graded {len(summary.students)} submissions x {len(summary.exercises)} exercises in "
+          f"{summary.seconds:.1f} s -> {summary.out / 'grades.csv'}")
+    return 0

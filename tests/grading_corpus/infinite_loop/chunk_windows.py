@@ -1,0 +1,3 @@
+def sequence_window_indices(episode_ends, horizon, n_obs_steps, n_action_steps):
+    while True:
+        pass
