@@ -29,34 +29,10 @@ umsgpack = pytest.importorskip("umsgpack")
 from coursekit.envs import pusht_geometry as geo  # noqa: E402
 from coursekit.viz.meshcat_pusht import PushTMeshcat, body_transform, export_pusht_rollout, to_meshcat_xy  # noqa: E402
 from coursekit.viz.meshcat_scene import MeshcatScene, pose_matrix  # noqa: E402
-from coursekit.viz.mujoco_meshcat import MujocoMeshcat, capsule_mesh, geom_rgba  # noqa: E402
+from coursekit.viz.mujoco_meshcat import GEOM_GALLERY_XML, MujocoMeshcat, capsule_mesh, geom_rgba  # noqa: E402
 from coursekit.viz.notebook import iframe_html, show_html  # noqa: E402
 
-# A model with every geom type the bridge draws, one colour each, on a free body (so all move),
-# plus a group-3 geom and an alpha-0 geom that must NOT be drawn.
-ALL_GEOMS_XML = """
-<mujoco>
-  <asset>
-    <mesh name="tet" vertex="0 0 0  0.12 0 0  0 0.12 0  0 0 0.12"/>
-    <material name="cyan" rgba="0 1 1 1"/>
-  </asset>
-  <worldbody>
-    <light pos="0 0 3"/>
-    <geom name="floor" type="plane" size="0.6 0.6 0.1" rgba="0.9 0.9 0.9 1"/>
-    <body name="thing" pos="0 0 0.3">
-      <freejoint/>
-      <geom name="box" type="box" size="0.08 0.05 0.03" rgba="1 0 0 1"/>
-      <geom name="sphere" type="sphere" size="0.06" pos="0.22 0 0" rgba="0 1 0 1"/>
-      <geom name="capsule" type="capsule" size="0.035 0.07" pos="-0.22 0 0" rgba="0 0 1 1"/>
-      <geom name="cylinder" type="cylinder" size="0.05 0.05" pos="0 0.22 0" rgba="1 1 0 1"/>
-      <geom name="ellipsoid" type="ellipsoid" size="0.08 0.05 0.04" pos="0 -0.22 0" rgba="1 0 1 1"/>
-      <geom name="mesh" type="mesh" mesh="tet" pos="0.15 0.15 0" material="cyan"/>
-    </body>
-    <geom name="collision_only" type="box" size="0.1 0.1 0.1" group="3"/>
-    <geom name="invisible" type="sphere" size="0.1" rgba="0 0 0 0"/>
-  </worldbody>
-</mujoco>
-"""
+# geoms of GEOM_GALLERY_XML that are drawn (not the group-3 or the alpha-0 one)
 DRAWN = ("floor", "box", "sphere", "capsule", "cylinder", "ellipsoid", "mesh")
 
 
@@ -219,7 +195,7 @@ def test_capsule_mesh_is_closed_outward_and_has_the_right_volume(radius, half_le
 
 
 def test_mujoco_bridge_draws_every_geom_type_with_its_colour(scene):
-    model = mujoco.MjModel.from_xml_string(ALL_GEOMS_XML)
+    model = mujoco.MjModel.from_xml_string(GEOM_GALLERY_XML)
     viewer = MujocoMeshcat(model, scene)
     names = [model.geom(int(i)).name for i in viewer.geom_ids]
     assert sorted(names) == sorted(DRAWN) and viewer.skipped == []
@@ -237,7 +213,7 @@ def test_mujoco_bridge_draws_every_geom_type_with_its_colour(scene):
 
 
 def test_mujoco_rollout_animation_matches_mjdata(scene, tmp_path):
-    model = mujoco.MjModel.from_xml_string(ALL_GEOMS_XML)
+    model = mujoco.MjModel.from_xml_string(GEOM_GALLERY_XML)
     data = mujoco.MjData(model)
     data.qvel[3:6] = [1.0, 2.0, 0.5]  # spin the free body while it falls
     xpos, xmat, qpos = [], [], []
@@ -272,7 +248,7 @@ def test_mujoco_rollout_animation_matches_mjdata(scene, tmp_path):
 
 
 def test_mujoco_bridge_rejects_bad_input(scene):
-    model = mujoco.MjModel.from_xml_string(ALL_GEOMS_XML)
+    model = mujoco.MjModel.from_xml_string(GEOM_GALLERY_XML)
     with pytest.raises(ValueError, match="MjModel"):
         MujocoMeshcat("not a model", scene)
     viewer = MujocoMeshcat(model, scene)

@@ -49,6 +49,34 @@ PLANE_THICKNESS = 0.002
 """Thickness (m) of the box that stands in for a plane."""
 
 
+# A tiny model with one geom of every type the bridge draws, each in its own colour, on a free body
+# (so all of them move), plus a group-3 (collision-only) geom and an alpha-0 geom that are NOT
+# drawn. Try it: ``MujocoMeshcat(mujoco.MjModel.from_xml_string(GEOM_GALLERY_XML))``.
+GEOM_GALLERY_XML = """
+<mujoco>
+  <asset>
+    <mesh name="tet" vertex="0 0 0  0.12 0 0  0 0.12 0  0 0 0.12"/>
+    <material name="cyan" rgba="0 1 1 1"/>
+  </asset>
+  <worldbody>
+    <light pos="0 0 3"/>
+    <geom name="floor" type="plane" size="0.6 0.6 0.1" rgba="0.9 0.9 0.9 1"/>
+    <body name="thing" pos="0 0 0.3">
+      <freejoint/>
+      <geom name="box" type="box" size="0.08 0.05 0.03" rgba="1 0 0 1"/>
+      <geom name="sphere" type="sphere" size="0.06" pos="0.22 0 0" rgba="0 1 0 1"/>
+      <geom name="capsule" type="capsule" size="0.035 0.07" pos="-0.22 0 0" rgba="0 0 1 1"/>
+      <geom name="cylinder" type="cylinder" size="0.05 0.05" pos="0 0.22 0" rgba="1 1 0 1"/>
+      <geom name="ellipsoid" type="ellipsoid" size="0.08 0.05 0.04" pos="0 -0.22 0" rgba="1 0 1 1"/>
+      <geom name="mesh" type="mesh" mesh="tet" pos="0.15 0.15 0" material="cyan"/>
+    </body>
+    <geom name="collision_only" type="box" size="0.1 0.1 0.1" group="3"/>
+    <geom name="invisible" type="sphere" size="0.1" rgba="0 0 0 0"/>
+  </worldbody>
+</mujoco>
+"""
+"""One geom of every drawable type (see the comment above)."""
+
 def capsule_mesh(radius: float, half_length: float, n_around: int = 24, n_cap: int = 6) -> tuple[np.ndarray, np.ndarray]:
     """A closed capsule along z, centred on the origin: vertices (N, 3), triangles (M, 3) wound outwards.
 
