@@ -139,9 +139,13 @@ class AlohaEnv(gymnasium.Env):
         action = np.clip(action, self.action_space.low, self.action_space.high)  # documented clip
         self.index.set_action(self.data, action)
         good_qpos, good_qvel = self.data.qpos.copy(), self.data.qvel.copy()
+        warnings_before = self._instability_warnings()
         mujoco.mj_step(self.model, self.data, nstep=N_SUBSTEPS)
         self._t += 1
-        unstable = not (np.all(np.isfinite(self.data.qpos)) and np.all(np.isfinite(self.data.qvel)))
+        # MuJoCo resets the state itself when it meets NaN/inf accelerations and only counts a
+        # warning, so check both the numbers and the warning counters.
+        unstable = (self._instability_warnings() > warnings_before
+                    or not (np.all(np.isfinite(self.data.qpos)) and np.all(np.isfinite(self.data.qvel))))
         if unstable:  # restore the last finite state so the observation stays valid
             self.set_physics_state(good_qpos, good_qvel)
         stage = self.task.stage(self.data)
@@ -171,6 +175,9 @@ class AlohaEnv(gymnasium.Env):
         if self._renderer is None or (self._renderer.height, self._renderer.width) != (h, w):
             self.close()
             self._renderer = CameraRenderer(self.model, h, w)
+        # mj_step leaves the kinematics one substep behind qpos; recompute them so that an image
+        # is a function of the physics state alone (a stored state re-renders identically).
+        mujoco.mj_forward(self.model, self.data)
         return self._renderer.render(self.data, camera)
 
     def get_physics_state(self) -> dict[str, np.ndarray]:
@@ -207,6 +214,11 @@ class AlohaEnv(gymnasium.Env):
         return self.task.strict_success(self.data)
 
     # ---- internals ------------------------------------------------------------------------
+    def _instability_warnings(self) -> int:
+        w = self.data.warning
+        return int(sum(w[i].number for i in (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQPOS,
+                                             mujoco.mjtWarning.mjWARN_BADQVEL)))
+
     def _obs(self) -> dict[str, np.ndarray]:
         obs = {"qpos": self.index.qpos14(self.data), "qvel": self.index.qvel14(self.data)}
         if self.obs_type == "state":

@@ -8,6 +8,8 @@ OSMesa; ``MUJOCO_GL`` must be set before ``mujoco`` is imported (coursekit.envs.
 
 from __future__ import annotations
 
+import os
+
 import mujoco
 import numpy as np
 
@@ -28,7 +30,14 @@ class CameraRenderer:
             raise ValueError(f"image size {height}x{width} exceeds the model's offscreen buffer {max_h}x{max_w}")
         self.model = model
         self.height, self.width = height, width
-        self._renderer = mujoco.Renderer(model, height=height, width=width)
+        try:
+            self._renderer = mujoco.Renderer(model, height=height, width=width)
+        except mujoco.FatalError as exc:
+            raise RuntimeError(
+                f"MuJoCo could not create an offscreen OpenGL context (MUJOCO_GL={os.environ.get('MUJOCO_GL')!r}): "
+                "set MUJOCO_GL=egl (or osmesa) before mujoco is first imported, e.g. import "
+                "coursekit.envs.aloha before mujoco"
+            ) from exc
         self._cameras = {model.camera(i).name for i in range(model.ncam)}
 
     def render(self, data: mujoco.MjData, camera: str = "top") -> np.ndarray:
