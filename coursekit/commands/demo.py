@@ -1,0 +1,118 @@
+"""``coursekit demo``: the end-to-end tour (what ``make demo`` runs), a few minutes on a laptop CPU.
+
+1. generate a handful of PushT demonstrations with the scripted expert and save them;
+2. replay one of them in a fresh environment (same actions, same trajectory: the physics is
+   deterministic) and check that it ends in success;
+3. write the replay as a 3-D meshcat animation (one self-contained HTML file) and a matplotlib
+   figure (the replayed pusher path; every demonstration's coverage over time) under ``--out``;
+4. print where everything is and how to open the course.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+HELP = "the end-to-end tour: PushT demonstrations, a replay, a meshcat HTML animation and a figure"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--episodes", type=int, default=6, help="number of scripted demonstrations (default 6)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the first demonstration (episode i uses seed + i)")
+    parser.add_argument("--out", type=Path, default=Path("outputs"), help="output folder (default outputs/)")
+    parser.add_argument("--replay", type=int, default=0, help="which demonstration to replay and animate (default 0)")
+    parser.add_argument("--no-progress", action="store_true", help="hide progress bars")
+
+
+def replay_episode(states, actions):
+    """Replay ``actions`` (T, 2) in a fresh PushTEnv from ``states[0]``.
+
+    Returns (replayed states (T, 7) [ax, ay, bx, by, angle, vx, vy], coverage (T,) after each
+    action, largest |position difference| (px) to the recorded states (T, 5)).
+    """
+    import numpy as np
+
+    from coursekit.envs.pusht import PushTEnv
+
+    env = PushTEnv()
+    env.reset()
+    # set_state puts the T exactly at the recorded pose (angle set before position); the
+    # reset option "reset_to_state" would apply the reference's LEGACY order and shift the T.
+    env.set_state(np.asarray(states[0][:5], dtype=np.float64))
+    replayed, coverage = [env.get_state()], []
+    for action in actions:
+        _, _, _, _, info = env.step(action)  # the raw env keeps stepping after success: the rest steps
+        replayed.append(env.get_state())
+        coverage.append(info["coverage"])
+    env.close()
+    replayed = np.array(replayed[:-1])  # (T, 7): the state each action was taken in, like the dataset
+    drift = float(np.abs(replayed[:, :4] - np.asarray(states)[:, :4]).max())
+    return replayed, np.array(coverage), drift
+
+
+def save_figure(dataset, replay: int, path: Path) -> Path:
+    """The replayed demonstration's pusher path over its start, and every demonstration's coverage."""
+    from matplotlib.figure import Figure
+
+    from coursekit.io import atomic_path
+    from coursekit.viz.pusht_plots import plot_coverage, plot_trajectories
+
+    episodes = [dataset.episode(i) for i in range(dataset.n_episodes)]
+    states = episodes[replay]["state"]
+    fig = Figure(figsize=(10.0, 4.6), layout="constrained")
+    left, right = fig.subplots(1, 2, width_ratios=[1.0, 1.15])
+    plot_trajectories([states], ax=left, end_states=[states[-1]], labels=["pusher path"],
+                      title=f"demonstration {replay}: start, pusher path, end (dotted)")
+    plot_coverage([ep["coverage"] for ep in episodes], labels=[f"demonstration {i}" for i in range(len(episodes))],
+                  ax=right)
+    right.set_title(f"{len(episodes)} scripted demonstrations: coverage of the goal T")
+    with atomic_path(path, suffix=".png") as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    return path
+
+
+def run(args: argparse.Namespace) -> int:
+    if not 1 <= args.episodes <= 1000:
+        raise ValueError(f"--episodes must be between 1 and 1000, got {args.episodes}")
+    if not 0 <= args.replay < args.episodes:
+        raise ValueError(f"--replay must index one of the {args.episodes} episodes, got {args.replay}")
+    out: Path = args.out
+    start = time.perf_counter()
+
+    from coursekit.experts.pusht_planner import collect_dataset
+
+    print(f"[1/4] generating {args.episodes} PushT demonstrations with the scripted expert (seed {args.seed}) ...")
+    t0 = time.perf_counter()
+    dataset = collect_dataset(args.episodes, args.seed, progress=not args.no_progress)
+    data_path = dataset.save(out / "data" / f"demo_pusht_{args.episodes}ep_seed{args.seed}.npz")
+    lengths = dataset.episode_lengths
+    print(f"      {dataset.n_episodes} episodes, {dataset.n_steps} steps (mean {lengths.mean():.0f} per episode) "
+          f"in {time.perf_counter() - t0:.1f} s")
+
+    print(f"[2/4] replaying demonstration {args.replay} in a fresh environment ...")
+    episode = dataset.episode(args.replay)
+    replayed, coverage, drift = replay_episode(episode["state"], episode["action"])
+    print(f"      {len(replayed)} steps, final coverage {coverage[-1]:.3f} "
+          f"({'success' if coverage.max() > 0.95 else 'NOT a success'}); "
+          f"largest drift from the recorded states {drift:.2e} px")
+
+    print("[3/4] writing the replay as a 3-D meshcat animation ...")
+    from coursekit.viz.meshcat_pusht import export_pusht_rollout
+    from coursekit.viz.meshcat_scene import MeshcatScene
+
+    t0 = time.perf_counter()
+    with MeshcatScene() as scene:  # its server is killed as soon as the page is written
+        html_path = export_pusht_rollout(replayed, out / "demo_pusht_replay.html", actions=episode["action"],
+                                         scene=scene)
+    print(f"      {html_path.stat().st_size / 1e6:.2f} MB in {time.perf_counter() - t0:.1f} s")
+
+    print("[4/4] drawing the demonstrations with matplotlib ...")
+    fig_path = save_figure(dataset, args.replay, out / "demo_pusht.png")
+
+    print(f"\nDone in {time.perf_counter() - start:.0f} s. Open these:")
+    print(f"  demonstrations   {data_path}")
+    print(f"  3-D replay       {html_path.resolve().as_uri()}   (any browser, works offline)")
+    print(f"  figure           {fig_path}")
+    print("\nNext: `make lab` opens the course in JupyterLab; start with notebooks/00_setup_and_tour.ipynb.")
+    return 0
