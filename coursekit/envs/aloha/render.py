@@ -34,9 +34,10 @@ class CameraRenderer:
             self._renderer = mujoco.Renderer(model, height=height, width=width)
         except mujoco.FatalError as exc:
             raise RuntimeError(
-                f"MuJoCo could not create an offscreen OpenGL context (MUJOCO_GL={os.environ.get('MUJOCO_GL')!r}): "
-                "set MUJOCO_GL=egl (or osmesa) before mujoco is first imported, e.g. import "
-                "coursekit.envs.aloha before mujoco"
+                f"MuJoCo could not create an offscreen OpenGL context (MUJOCO_GL is now "
+                f"{os.environ.get('MUJOCO_GL')!r}, but mujoco reads it when first imported): set "
+                "MUJOCO_GL=egl (or osmesa) before mujoco is first imported, e.g. import coursekit.envs.aloha "
+                "before mujoco"
             ) from exc
         self._cameras = {model.camera(i).name for i in range(model.ncam)}
 
