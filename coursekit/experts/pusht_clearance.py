@@ -90,3 +90,4 @@ def segment_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         d_corner = _point_segment_distance(corners, a[..., None, :], b[..., None, :]).min(-1)
         best = np.minimum(best, np.where(_segment_hits_box(a, b, lo[k], hi[k]), 0.0, d_corner))
     return best
+

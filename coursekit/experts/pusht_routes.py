@@ -63,18 +63,23 @@ class RoutePlanner:
         out = -(inward + np.roll(inward, 1, axis=0))  # (8, 2) sum of the two outward normals
         self.waypoints = (v + out * waypoint_clearance)[convex]  # (W, 2), outline order
         n_w = len(self.waypoints)
-        # Legs between neighbouring waypoints run along the convex hull: always clear.
-        leg = np.linalg.norm(np.roll(self.waypoints, -1, axis=0) - self.waypoints, axis=1)  # (W,)
         if segment_distance(self.waypoints, np.roll(self.waypoints, -1, axis=0)).min() < self.clearance - 1e-6:
             raise ValueError(f"waypoint_clearance {waypoint_clearance} leaves hull legs closer than {clearance}")
-        # chain[d, i, j]: length from waypoint i to j walking direction d (0: outline order = cw
-        # on screen, 1: reverse = ccw), through every waypoint in between.
-        cum = np.concatenate([[0.0], np.cumsum(leg)])  # (W+1,)
+        # Legs between neighbouring waypoints run along the convex hull (checked just above).
+        # chain[d, i, j]: length from waypoint i to j walking direction d (0: outline order, which
+        # is clockwise on screen; 1: the reverse), through every waypoint in between; sweep[d, i, j]:
+        # the signed angle that walk turns about the centre of gravity (> 0: clockwise on screen).
+        leg = np.linalg.norm(np.roll(self.waypoints, -1, axis=0) - self.waypoints, axis=1)  # (W,)
+        self.centre = np.asarray(geo.T_COG_LOCAL, dtype=np.float64)
+        turn = _sweep(self.waypoints, np.roll(self.waypoints, -1, axis=0), self.centre)  # (W,) all > 0
+        cum_len = np.concatenate([[0.0], np.cumsum(leg)])  # (W+1,)
+        cum_turn = np.concatenate([[0.0], np.cumsum(turn)])
         i, j = np.meshgrid(np.arange(n_w), np.arange(n_w), indexing="ij")
-        forward = (cum[j] - cum[i]) % cum[-1]  # (W, W)
-        forward = np.where(i == j, 0.0, forward)
-        backward = np.where(i == j, 0.0, cum[-1] - forward)
-        self._chain = np.stack([forward, backward])  # (2, W, W)
+        same = i == j
+        fwd_len = np.where(same, 0.0, (cum_len[j] - cum_len[i]) % cum_len[-1])  # (W, W)
+        fwd_turn = np.where(same, 0.0, (cum_turn[j] - cum_turn[i]) % cum_turn[-1])
+        self._chain = np.stack([fwd_len, np.where(same, 0.0, cum_len[-1] - fwd_len)])  # (2, W, W)
+        self._sweep = np.stack([fwd_turn, np.where(same, 0.0, fwd_turn - cum_turn[-1])])
 
     # ----------------------------------------------------------------------------------------
     def _visible(self, a: np.ndarray, b: np.ndarray, start_clearance: np.ndarray) -> np.ndarray:
@@ -83,27 +88,42 @@ class RoutePlanner:
         clearance."""
         return segment_distance(a, b) >= np.minimum(self.clearance, start_clearance) - 0.5
 
+    def _round_the_t(self, pose, start: np.ndarray, goals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Best routes round the T to M goals (M, 2) from ``start`` (2,) (body frame).
+
+        Returns lengths (2, M) [cw, ccw] (inf: none) and the (2, M, 2) waypoint indices
+        (entry, exit) of each. A route start -> wp i -> ... -> wp j -> goal counts as clockwise
+        when its total sweep about the centre of gravity is positive: entering and leaving at
+        the same waypoint is a real route too, and belongs to exactly one side.
+        """
+        wp = self.waypoints
+        n_w, n_g = len(wp), len(goals)
+        lo, hi = self.arena
+        wp_world = local_to_world(wp, pose)
+        in_arena = np.all((wp_world >= lo) & (wp_world <= hi), axis=1)  # (W,)
+        vis_start = self._visible(start, wp, point_distance(start)) & in_arena  # (W,)
+        vis_goal = self._visible(wp[None], goals[:, None], point_distance(goals)[:, None]) & in_arena  # (M, W)
+        to_wp = np.where(vis_start, np.linalg.norm(wp - start, axis=1), np.inf)  # (W,)
+        from_wp = np.where(vis_goal, np.linalg.norm(wp[None] - goals[:, None], axis=2), np.inf)  # (M, W)
+        # total[d, m, i, j] = start -> wp i -> (chain, direction d) -> wp j -> goal m
+        total = to_wp[None, None, :, None] + self._chain[:, None] + from_wp[None, :, None, :]  # (2, M, W, W)
+        sweep = (_sweep(start, wp, self.centre)[None, None, :, None] + self._sweep[:, None]
+                 + _sweep(wp[None], goals[:, None], self.centre)[None, :, None, :])  # (2, M, W, W)
+        right_way = np.stack([sweep[0] > 0, sweep[1] < 0])  # (2, M, W, W)
+        total = np.where(right_way, total, np.inf).reshape(2, n_g, n_w * n_w)  # (2, M, W*W)
+        best = total.argmin(-1)  # (2, M)
+        lengths = np.take_along_axis(total, best[..., None], -1)[..., 0]  # (2, M)
+        return lengths, np.stack(np.unravel_index(best, (n_w, n_w)), axis=-1)  # (2, M, 2)
+
     def lengths(self, pose, start_local: np.ndarray, goals_local: np.ndarray) -> np.ndarray:
         """Route lengths (3, M) to M goals (M, 2) from one start (2,), body frame, rows
         [straight, cw, ccw]; inf where that kind of route does not exist."""
-        goals_local = np.asarray(goals_local, dtype=np.float64)
+        goals = np.asarray(goals_local, dtype=np.float64).reshape(-1, 2)
         start = np.asarray(start_local, dtype=np.float64)
-        d_start = point_distance(start)
-        d_goals = point_distance(goals_local)  # (M,)
-        out = np.full((3, len(goals_local)), np.inf)
-        direct = np.linalg.norm(goals_local - start, axis=1)  # (M,)
-        clear = self._visible(start, goals_local, np.minimum(d_start, d_goals))
-        out[0] = np.where(clear, direct, np.inf)
-        wp_world = local_to_world(self.waypoints, pose)  # (W, 2)
-        lo, hi = self.arena
-        in_arena = np.all((wp_world >= lo) & (wp_world <= hi), axis=1)  # (W,)
-        vis_start = self._visible(start, self.waypoints, d_start) & in_arena  # (W,)
-        vis_goal = self._visible(self.waypoints[None], goals_local[:, None], d_goals[:, None]) & in_arena  # (M, W)
-        to_wp = np.where(vis_start, np.linalg.norm(self.waypoints - start, axis=1), np.inf)  # (W,)
-        from_wp = np.where(vis_goal, np.linalg.norm(self.waypoints[None] - goals_local[:, None], axis=2), np.inf)
-        # total[d, m, i, j] = start -> wp i -> (chain, direction d) -> wp j -> goal m
-        total = to_wp[None, None, :, None] + self._chain[:, None] + from_wp[None, :, None, :]  # (2, M, W, W)
-        out[1:] = total.reshape(2, len(goals_local), -1).min(-1)  # (2, M)
+        out = np.full((3, len(goals)), np.inf)
+        clear = self._visible(start, goals, np.minimum(point_distance(start), point_distance(goals)))
+        out[0] = np.where(clear, np.linalg.norm(goals - start, axis=1), np.inf)
+        out[1:] = self._round_the_t(pose, start, goals)[0]
         return out
 
     def route(self, pose, start_local: np.ndarray, goal_local: np.ndarray, side: str) -> Route:
@@ -114,29 +134,25 @@ class RoutePlanner:
             pts = np.stack([start, goal])
         elif side in (CLOCKWISE, ANTICLOCKWISE):
             d = 0 if side == CLOCKWISE else 1
-            wp = self.waypoints
-            n_w = len(wp)
-            wp_world = local_to_world(wp, pose)
-            lo, hi = self.arena
-            in_arena = np.all((wp_world >= lo) & (wp_world <= hi), axis=1)
-            vis_s = self._visible(start, wp, point_distance(start)) & in_arena
-            vis_g = self._visible(wp, goal, point_distance(goal)) & in_arena
-            to_wp = np.where(vis_s, np.linalg.norm(wp - start, axis=1), np.inf)
-            from_wp = np.where(vis_g, np.linalg.norm(wp - goal, axis=1), np.inf)
-            total = to_wp[:, None] + self._chain[d] + from_wp[None, :]  # (W, W)
-            i, j = np.unravel_index(int(np.argmin(total)), total.shape)
-            if not np.isfinite(total[i, j]):
+            lengths, ends = self._round_the_t(pose, start, goal[None])
+            if not np.isfinite(lengths[d, 0]):
                 raise ValueError(f"no {side} route from {start} to {goal} (body frame)")
-            step = 1 if d == 0 else -1
-            chain = [i]
+            i, j = ends[d, 0]
+            step, chain = (1 if d == 0 else -1), [int(i)]
             while chain[-1] != j:
-                chain.append((chain[-1] + step) % n_w)
-            pts = np.concatenate([start[None], wp[chain], goal[None]])
+                chain.append((chain[-1] + step) % len(self.waypoints))
+            pts = np.concatenate([start[None], self.waypoints[chain], goal[None]])
         else:
             raise ValueError(f"side must be 'straight', 'cw' or 'ccw', got {side!r}")
         world = local_to_world(pts, pose)  # (K, 2)
         length = float(np.linalg.norm(np.diff(world, axis=0), axis=1).sum())
         return Route(points=world, side=side, length=length)
+
+
+def _sweep(a: np.ndarray, b: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """Signed angle (...,) from a to b (..., 2) seen from ``centre``, in (-pi, pi]."""
+    u, v = a - centre, b - centre
+    return np.arctan2(u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0], (u * v).sum(-1))
 
 
 # --------------------------------------------------------------------------------------------
