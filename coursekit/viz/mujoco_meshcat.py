@@ -239,7 +239,9 @@ class MujocoMeshcat:
             return np.asarray(self.model.stat.center, dtype=np.float64), 0.5 * float(self.model.stat.extent)
         pos, pad = data.geom_xpos[ids], self.model.geom_rbound[ids][:, None]  # (G, 3), (G, 1)
         lo, hi = (pos - pad).min(axis=0), (pos + pad).max(axis=0)  # (3,), (3,)
-        return (lo + hi) / 2, max(float(np.linalg.norm(hi - lo)) / 2, 1e-3)
+        # the box's circumscribed sphere frames it loosely (a corner is rarely at the silhouette's
+        # edge from an oblique view); 0.75 of it fills the window without cutting the arms off
+        return (lo + hi) / 2, max(0.75 * float(np.linalg.norm(hi - lo)) / 2, 1e-3)
 
     # -- poses ---------------------------------------------------------------------------------
     def show(self, data: mujoco.MjData) -> None:
