@@ -55,7 +55,16 @@ def _top_level(tree: ast.Module, name: str, exercise: Exercise) -> ast.AST:
 def _segment(lines: list[str], node: ast.AST) -> tuple[int, int]:
     """0-based [first, last) line range of a definition, decorators included."""
     first = min([node.lineno] + [d.lineno for d in getattr(node, "decorator_list", [])]) - 1
-    return first, node.end_lineno
+    last = node.end_lineno
+    # comments indented inside the body after its last statement (a closing "# END SOLUTION")
+    # belong to it, although the AST ends at that statement
+    i = last
+    while i < len(lines) and (not lines[i].strip() or (lines[i].lstrip().startswith("#")
+                                                       and len(lines[i]) - len(lines[i].lstrip()) > node.col_offset)):
+        i += 1
+        if lines[i - 1].strip():
+            last = i
+    return first, last
 
 
 def _marker_blocks(lines: list[str], first: int, last: int, where: str) -> list[tuple[int, int]]:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import hmac
 import json
 import os
+import re
 import secrets
 import select
 import shutil
@@ -286,6 +287,7 @@ def _attempt(exercises: list[Exercise], submission: Path, limits: Limits, source
             if ready:
                 eof = not _pump(read_fd, buffer, received)
         _interpret(bytes(buffer), nonce, proc.returncode, limits, result)
+        _scrub(result, scratch)
         result.log_tail = _log_tail(scratch / "harness.log")
     finally:
         for fd in (read_fd, write_fd):
@@ -299,6 +301,22 @@ def _attempt(exercises: list[Exercise], submission: Path, limits: Limits, source
         shutil.rmtree(scratch, ignore_errors=True)
         result.seconds = time.monotonic() - start
     return result
+
+
+_ADDRESS = re.compile(r" at 0x[0-9a-fA-F]+")
+
+
+def _scrub(result: RunResult, scratch: Path) -> None:
+    """Strip what differs between two runs of the same code (the random scratch folder, object
+    addresses in reprs) so that feedback, and a re-grade, is byte-identical."""
+    prefixes = {f"{scratch}/", f"{scratch.resolve()}/"}
+    for o in result.outcomes:
+        texts = []
+        for text in (o.message, o.detail, o.output):
+            for prefix in prefixes:
+                text = text.replace(prefix, "")
+            texts.append(_ADDRESS.sub(" at 0x...", text))
+        o.message, o.detail, o.output = texts
 
 
 def _log_tail(path: Path, limit: int = 3000) -> str:

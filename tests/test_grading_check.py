@@ -1,0 +1,45 @@
+"""coursekit.check / `coursekit check`: a table of test, points, pass/FAIL and hint, in seconds."""
+
+from __future__ import annotations
+
+import coursekit
+from coursekit.cli import main
+from coursekit.grading.paths import repo_root
+from coursekit.grading.registry import get_exercise
+
+
+def test_check_on_solutions_and_on_the_stub(capsys):
+    exercise = get_exercise("chunk_windows")
+    good = coursekit.check("chunk_windows", repo_root() / "solutions")
+    out = capsys.readouterr().out
+    assert good.all_passed and good.points == good.max_points == exercise.max_points
+    assert "Exercise 1.1 (chunk_windows)" in out and f"score {exercise.max_points:g} / {exercise.max_points:g}" in out
+    assert "FAIL" not in out and out.count(" pass") == len(exercise.tests)
+
+    bad = coursekit.check("chunk_windows", repo_root() / "exercises")
+    out = capsys.readouterr().out
+    assert not bad.all_passed and bad.points == 0
+    assert out.count("FAIL") == len(exercise.tests)
+    for _, hint in exercise.tests.values():
+        assert f"hint: {hint}" in out
+    assert "NotImplementedError: Exercise 1.1" in out
+    assert repr(bad) == f"CheckResult(chunk_windows: 0 / {exercise.max_points:g})"
+
+
+def test_check_uses_the_environment_like_load_exercise(monkeypatch, capsys, tmp_path):
+    monkeypatch.setenv("COURSEKIT_EXERCISES", "solutions")
+    assert coursekit.check("chunk_windows", show=False).all_passed
+    assert capsys.readouterr().out == ""
+    # a student's half-right module: partial credit, and the failing tests say why
+    source = (repo_root() / "solutions" / "chunk_windows.py").read_text()
+    (tmp_path / "chunk_windows.py").write_text(source.replace("t - horizon + pad_after", "t - horizon"))
+    partial = coursekit.check("chunk_windows", tmp_path, show=False)
+    assert 0 < partial.points < partial.max_points
+    assert any("Arrays are not equal" in s.message for s in partial.scores if not s.passed)
+
+
+def test_cli_exit_code(capsys):
+    assert main(["check", "chunk_windows", "--dir", str(repo_root() / "solutions")]) == 0
+    assert main(["check", "chunk_windows", "--dir", str(repo_root() / "exercises")]) == 1
+    assert main(["check", "nope"]) == 2
+    assert "unknown exercise" in capsys.readouterr().err

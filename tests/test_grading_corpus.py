@@ -1,0 +1,141 @@
+"""`coursekit grade` on the hostile corpus (tests/grading_corpus/) plus solutions/ and exercises/:
+the expected score and reason for every student, Gradescope JSON, feedback, nothing forged,
+and the same bytes when graded again."""
+
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from coursekit.cli import main
+from coursekit.grading.grade import grade_submissions
+from coursekit.grading.paths import repo_root
+from coursekit.grading.runner import Limits, _interpret, RunResult
+
+CORPUS = Path(__file__).parent / "grading_corpus"
+# short limits keep the run bounded: the two endless loops cost ~1 s per test / the 12 s budget
+LIMITS = Limits(timeout_s=12, test_timeout_s=1, memory_mb=512)
+
+# student -> (points out of 10, status, text that must appear in the feedback)
+EXPECTED = {
+    "reference_solutions": (10, "ok", "Total: **10 / 10**"),
+    "untouched_stub": (0, "ok", "NotImplementedError: Exercise 1.1"),
+    "syntax_error": (0, "ok", "SyntaxError: expected ':'"),
+    "import_error": (0, "ok", "ModuleNotFoundError: No module named 'a_module_that_does_not_exist'"),
+    "infinite_loop": (0, None, "Timeout (>1.0s)"),
+    "hang_ignoring_timeout": (0, "timeout", "took longer than 12 s"),
+    "huge_allocation": (0, None, "MemoryError"),
+    "os_exit": (0, "crashed", "exited early with code 0"),
+    "exit_at_import": (0, "crashed", "exited early with code 3"),
+    "sys_exit": (0, "ok", "SystemExit: 0"),
+    "print_flood": (10, "ok", "Total: **10 / 10**"),
+    "delete_files": (10, "ok", "Total: **10 / 10**"),
+    "forge_results": (0, "ok", "I did not do it"),
+    "tamper_tests": (0, "tampered", "tampering with the grader detected"),
+    "wrong_types": (0, "ok", "expected (W, 16)"),
+    # dies on short episodes only: test_short_episode_gets_one_window (1) and test_windows_stay_in_their_episode (2)
+    # and the random-dataset test (1) are lost, the rest keep their points in fresh subprocesses
+    "exit_on_short_episode": (6, "crashed", "this test did not finish"),
+    "off_by_padding": (4, "ok", "Arrays are not equal"),
+    "missing_module": (0, "missing", "chunk_windows.py was not found"),
+    "broken": (0, "missing", "could not read broken.zip"),
+    "zipped": (10, "ok", "Total: **10 / 10**"),
+}
+
+
+def _submissions(tmp_path: Path, names=None) -> Path:
+    subs = tmp_path / "submissions"
+    subs.mkdir()
+    for entry in sorted(CORPUS.iterdir()):
+        if entry.name == "README.md" or (names and entry.stem not in names):
+            continue
+        (shutil.copytree if entry.is_dir() else shutil.copy)(entry, subs / entry.name)
+    if not names:
+        shutil.copytree(repo_root() / "solutions", subs / "reference_solutions")
+        shutil.copytree(repo_root() / "exercises", subs / "untouched_stub")
+    return subs
+
+
+@pytest.fixture(scope="module")
+def graded(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("corpus")
+    out = tmp / "out"
+    summary = grade_submissions(_submissions(tmp), out, ["chunk_windows"], jobs=2, limits=LIMITS, progress=False)
+    return summary, out
+
+
+def test_every_student_gets_the_expected_row(graded):
+    summary, out = graded
+    rows = {r["student"]: r for r in csv.DictReader((out / "grades.csv").open())}
+    assert set(rows) == set(EXPECTED)
+    for student, (points, status, text) in EXPECTED.items():
+        row = rows[student]
+        assert float(row["chunk_windows"]) == points and float(row["total"]) == points, (student, row)
+        assert row["max"] == "10"
+        grade = next(s for s in summary.students if s.student == student).grades[0]
+        if status is not None:
+            assert grade.status == status, (student, grade.status, grade.reason)
+        feedback = (out / student / "feedback.md").read_text()
+        assert text in feedback, f"{student}: {text!r} not in feedback:\n{feedback[:3000]}"
+    assert summary.warnings == []
+    # bounded: the budget is dominated by the two endless loops (see LIMITS)
+    assert summary.seconds < 110
+
+
+def test_gradescope_results_json(graded):
+    _, out = graded
+    for student, (points, _, _) in EXPECTED.items():
+        result = json.loads((out / student / "results.json").read_text())
+        assert result["score"] == points
+        tests = result["tests"]
+        assert len(tests) == 7 and {t["status"] for t in tests} <= {"passed", "failed"}
+        assert sum(t["score"] for t in tests) == pytest.approx(points)
+        assert sum(t["max_score"] for t in tests) == 10
+        for t in tests:
+            assert t["name"].startswith("1.1 chunk_windows: test_") and t["number"].startswith("1.1.")
+            assert (t["status"] == "passed") == (t["score"] == t["max_score"])
+            if t["status"] == "failed":
+                assert "hint: " in t["output"]
+
+
+def test_nothing_forged_or_left_behind(graded):
+    _, out = graded
+    files = sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file())
+    expected = ["grades.csv"] + sorted(f"{s}/{f}" for s in EXPECTED for f in ("feedback.md", "results.json"))
+    assert files == sorted(expected)
+    assert "forge_results,10" not in (out / "grades.csv").read_text()
+
+
+def test_regrading_gives_identical_files(tmp_path):
+    names = ["print_flood", "exit_on_short_episode", "off_by_padding", "tamper_tests", "syntax_error", "zipped"]
+    subs = _submissions(tmp_path, names)
+    outs = [tmp_path / "first", tmp_path / "second"]
+    for out in outs:
+        assert main(["grade", str(subs), "--out", str(out), "--exercise", "chunk_windows", "--jobs", "2",
+                     "--timeout", "12", "--test-timeout", "2", "--memory-mb", "512", "--no-progress"]) == 0
+    first = {p.relative_to(outs[0]): p.read_bytes() for p in outs[0].rglob("*") if p.is_file()}
+    second = {p.relative_to(outs[1]): p.read_bytes() for p in outs[1].rglob("*") if p.is_file()}
+    assert first == second and len(first) == 1 + 2 * len(names)
+
+
+def test_only_nonce_tagged_lines_count():
+    nonce = "ab" * 16
+    lines = [
+        {"nonce": nonce, "event": "collected", "tests": ["test_x.py::test_a", "test_x.py::test_b"]},
+        {"nonce": "0" * 32, "event": "result", "test": "test_x.py::test_a", "outcome": "passed"},  # forged
+        {"nonce": nonce, "event": "result", "test": "test_x.py::test_a", "outcome": "failed", "message": "boom"},
+        {"nonce": nonce, "event": "result", "test": "test_x.py::test_a", "outcome": "passed"},  # duplicate
+        {"event": "result", "test": "test_x.py::test_b", "outcome": "passed"},  # untagged
+        {"nonce": nonce, "event": "start", "test": "test_x.py::test_b"},
+    ]
+    data = ("\n".join(json.dumps(x) for x in lines) + "\nnot json\n").encode()
+    result = RunResult()
+    _interpret(data, nonce, 0, LIMITS, result)
+    outcomes = {o.nodeid: o for o in result.outcomes}
+    assert outcomes["test_x.py::test_a"].outcome == "failed" and outcomes["test_x.py::test_a"].message == "boom"
+    assert outcomes["test_x.py::test_b"].outcome == "failed"
+    assert result.status == "crashed" and "did not finish" in outcomes["test_x.py::test_b"].message
