@@ -161,3 +161,21 @@ def test_aloha_rollout_page_shows_the_arm_pair(chromium, scene, tmp_path):
     assert colour_mask(img, cube, 60).mean() > 0.0001, "the cube is not visible"
     dark = (img.max(axis=-1) < 90).mean()  # the arms are dark grey links
     assert 0.005 < dark < 0.3, f"dark (arm) pixels cover {dark:.2%}"
+
+
+def test_notebook_iframe_shows_the_scene(chromium, scene, tmp_path):
+    """What a notebook cell shows: the exported page inside show_html's iframe srcdoc."""
+    from coursekit.envs.pusht_render import BLOCK_COLOR, GOAL_COLOR
+    from coursekit.viz.meshcat_pusht import PushTMeshcat
+    from coursekit.viz.notebook import show_html
+
+    viewer = PushTMeshcat(scene)
+    viewer.animate(pusht_states(5, 200.0, 220.0), play=False)
+    cell = show_html(viewer.html(), height=500).data
+    wrapper = tmp_path / "cell.html"
+    wrapper.write_text(f"<!DOCTYPE html><html><body style='margin:0'>{cell}</body></html>")
+    img = load_rgb(screenshot_html(wrapper, tmp_path / "cell.png"))
+    assert_not_blank(img)
+    assert colour_mask(img[:500], BLOCK_COLOR, 25).mean() > 0.003, "block not drawn inside the iframe"
+    assert colour_mask(img[:500], GOAL_COLOR, 25).mean() > 0.002, "goal not drawn inside the iframe"
+    assert colour_mask(img[520:], (255, 255, 255), 3).mean() > 0.9, "below the 500 px iframe the page is blank"
