@@ -49,6 +49,8 @@ def test_interpolate_is_linear_between_waypoints_and_clamped():
 def test_script_config_validates():
     with pytest.raises(ValueError, match="95"):
         ScriptConfig(pick_pitch_deg=95)
+    with pytest.raises(ValueError, match="220"):
+        ScriptConfig(release_start=220)
 
 
 @pytest.mark.parametrize("task, env_cls, seed", [("transfer_cube", AlohaTransferCubeEnv, 11), ("insertion", AlohaInsertionEnv, 11)])

@@ -76,12 +76,16 @@ class ScriptConfig:
     """Insertion: the socket's grasp site goes to meet_x - 0.045 at this height (m)."""
     insert_push: float = 0.005
     """Insertion: how far the plan drives the peg tip past the pin's end (m)."""
+    measure_grasp: bool = True
+    """Insertion: re-aim the meeting poses at how the objects really sit in the grippers (after
+    the lift); False = ACT-style open loop, trusting the planned grasp offsets."""
 
     def __post_init__(self) -> None:
         if not 0.0 < self.pick_pitch_deg < 90.0:
             raise ValueError(f"pick_pitch_deg must be in (0, 90), got {self.pick_pitch_deg}")
-        if not 0 < self.release_start < EPISODE_STEPS - 40:
-            raise ValueError(f"release_start must be in (0, {EPISODE_STEPS - 40}), got {self.release_start}")
+        if not 260 < self.release_start < EPISODE_STEPS - 50:
+            raise ValueError(f"release_start must be in (260, {EPISODE_STEPS - 50}) (after the left hand arrives), "
+                             f"got {self.release_start}")
 
 
 def transfer_cube_plan(env_state: np.ndarray, start: list[tuple[np.ndarray, np.ndarray]],
@@ -190,7 +194,7 @@ def run_end_effector(task: str, env_state: np.ndarray, plan_fn, cfg: ScriptConfi
     qpos = [scene.qpos14()]
     grip, stage, err = [], [], []
     for t in range(EPISODE_STEPS):
-        if task == "insertion" and t == INSERTION_REPLAN_STEP:
+        if task == "insertion" and t == INSERTION_REPLAN_STEP and cfg.measure_grasp:
             left, right = plan_fn(env_state, start, cfg, held=scene.held_offsets(("socket", "peg")))
         lc, rc = interpolate(left, t + 1), interpolate(right, t + 1)  # aim at the next step's pose
         scene.step(lc, rc)
