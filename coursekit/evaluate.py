@@ -241,7 +241,8 @@ def evaluate_pusht(policy: Any, n_episodes: int = 50, seeds: Sequence[int] | Non
                      desc=f"eval {getattr(policy, 'policy_type', '')}".strip())
     c = policy.config
     result.info.update({"policy_type": getattr(policy, "policy_type", ""), "max_steps": max_steps,
-                        "n_action_steps": c.n_action_steps, "sampler": sampler or getattr(c, "sampler", None),
-                        "num_inference_steps": num_inference_steps or getattr(c, "num_inference_steps", None),
-                        "sampling_seed": seed})
+                        "n_action_steps": c.n_action_steps, "sampling_seed": seed})
+    if hasattr(policy, "make_sampler"):  # diffusion: which sampler and how many steps really ran
+        result.info.update({"sampler": sampler or c.sampler,
+                            "num_inference_steps": len(policy.make_sampler(sampler, num_inference_steps).timesteps)})
     return result

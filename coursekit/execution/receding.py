@@ -98,7 +98,11 @@ class RecedingHorizon:
         return chunk
 
     def reset(self, obs: Any) -> None:
-        """Start an episode: the history becomes To copies of the first observation ``obs`` (B, ...)."""
+        """Start an episode: ``self.history`` becomes a list of To copies of the first observation ``obs`` (B, ...).
+
+        Also forget any plan left from the last episode (``self.plan = None``, ``self.plan_index = 0``),
+        so the first ``act`` re-plans at once.
+        """
         # BEGIN SOLUTION
         self.history = [obs] * self.n_obs_steps
         self.plan = None
@@ -107,11 +111,19 @@ class RecedingHorizon:
         self.n_calls = 0
 
     def act(self, obs: Any) -> Any:
-        """Push ``obs`` (B, ...) into the history; return the next action (B, Da), re-planning when the plan is used up.
+        """Push ``obs`` (B, ...) into the history; return the next action ``action`` (B, Da).
 
-        A re-plan calls ``self._predict()`` (the predictor on the stacked history, (B, Tp, Da))
-        and keeps the executed slice ``chunk[:, start : start + Ta]``.
+        1. history <- history[1:] + [obs]   (keep the newest To observations, oldest first)
+        2. if no planned action is left (first call after reset, or Ta actions executed):
+           chunk = self._predict()           (B, Tp, Da): the predictor on the stacked history
+           plan  = chunk[:, start : start + Ta]   (B, Ta, Da), start = To - 1 by default
+        3. action = the next unexecuted action of the plan, (B, Da)
+
+        State to keep: ``self.history`` (list of To observations), ``self.plan`` and
+        ``self.plan_index`` (how many actions of the plan were executed).
         """
+        if not self.history:
+            raise ValueError("act() called before reset(obs): call reset with the first observation")
         # BEGIN SOLUTION
         self.history = [*self.history[1:], obs]  # drop the oldest, keep To observations
         if self.plan is None or self.plan_index >= self.n_action_steps:
@@ -120,5 +132,5 @@ class RecedingHorizon:
             self.plan_index = 0
         action = self.plan[:, self.plan_index]  # (B, Da)
         self.plan_index += 1
-        return action
         # END SOLUTION
+        return action

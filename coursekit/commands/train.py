@@ -1,0 +1,55 @@
+"""``coursekit train``: train a chunk policy on PushT demonstrations and write a checkpoint."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+HELP = "train a Diffusion Policy (or the regression baseline) on PushT demonstrations"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--policy", choices=["diffusion", "regression"], default="diffusion", help="policy head (default: diffusion)")
+    parser.add_argument("--data", type=Path, required=True, help="demonstrations .npz (from `coursekit collect pusht`)")
+    parser.add_argument("--out", type=Path, required=True, help="checkpoint directory to write (model.safetensors + config.json)")
+    parser.add_argument("--minutes", type=float, default=None, help="wall-clock training budget in minutes")
+    parser.add_argument("--steps", type=int, default=None, help="optimiser steps (default: until --minutes is used up)")
+    parser.add_argument("--features", choices=["pusht_state", "pusht_keypoints", "pusht_image"], default="pusht_state",
+                        help="observation features (default: pusht_state = agent xy, block xy, sin/cos angle)")
+    parser.add_argument("--unet", default="cpu", help="U-Net size preset: cpu (default), paper_lowdim, paper_image")
+    parser.add_argument("--n-action-steps", type=int, default=8, help="Ta, actions executed per chunk (default 8)")
+    parser.add_argument("--batch-size", type=int, default=None, help="batch size (default 256 low-dim, 64 images)")
+    parser.add_argument("--lr", type=float, default=1e-4, help="peak learning rate (default 1e-4)")
+    parser.add_argument("--warmup-steps", type=int, default=500, help="linear LR warm-up steps (default 500)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of weights, batches and noise (default 0)")
+    parser.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
+    parser.add_argument("--device", default="auto", help="auto, cpu, cuda, mps (default auto)")
+    parser.add_argument("--checkpoint-every", type=float, default=5.0, help="minutes between periodic checkpoints (default 5)")
+    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+
+
+def run(args: argparse.Namespace) -> int:
+    from coursekit.data.episodes import EpisodeDataset
+    from coursekit.nn.unet1d import UNet1DConfig
+    from coursekit.policies.factory import make_pusht_policy
+    from coursekit.train import TrainConfig, train
+
+    if args.minutes is None and args.steps is None:
+        raise ValueError("give a budget: --minutes M and/or --steps N")
+    batch_size = args.batch_size or (64 if args.features == "pusht_image" else 256)
+    config = TrainConfig(lr=args.lr, warmup_steps=args.warmup_steps, batch_size=batch_size, max_steps=args.steps,
+                         minutes=args.minutes, seed=args.seed, num_threads=args.threads,
+                         checkpoint_every_minutes=args.checkpoint_every, progress=not args.no_progress)
+    dataset = EpisodeDataset.load(args.data)
+    policy, batches = make_pusht_policy(args.policy, dataset, features=args.features, batch_size=batch_size,
+                                        seed=args.seed, device=args.device, unet=UNet1DConfig.preset(args.unet),
+                                        n_action_steps=args.n_action_steps)
+    meta = {**dataset.meta, "path": str(args.data), "n_steps": dataset.n_steps, "n_episodes": dataset.n_episodes}
+    print(f"{args.policy} policy, {policy.num_parameters() / 1e6:.2f} M parameters, {len(batches)} windows "
+          f"from {dataset.n_episodes} episodes; device {policy.device}")
+    result = train(policy, batches, config, out_dir=args.out, dataset_meta=meta)
+    s = result.summary
+    print(json.dumps({k: s[k] for k in ("steps", "seconds", "samples_per_s", "final_loss")}))
+    print(f"wrote {args.out}")
+    return 0

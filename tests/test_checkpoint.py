@@ -1,0 +1,144 @@
+"""Checkpoints: round trip with identical predictions; every kind of corrupt/mismatched checkpoint refused."""
+
+from __future__ import annotations
+
+import json
+import pickle
+
+import numpy as np
+import pytest
+import torch
+
+from coursekit.checkpoint import CheckpointError, _sha256, load_checkpoint, read_checkpoint_info, save_checkpoint
+from coursekit.data import MinMaxNormalizer
+from coursekit.nn.unet1d import UNet1DConfig
+from coursekit.policies.diffusion import DiffusionPolicy, DiffusionPolicyConfig
+from coursekit.policies.regression import RegressionPolicy, RegressionPolicyConfig
+
+TINY = UNet1DConfig(down_dims=(16, 32), kernel_size=3, n_groups=4, diffusion_step_embed_dim=16)
+NORMS = {"obs": MinMaxNormalizer(np.arange(6.0), np.arange(6.0) + 400),
+         "action": MinMaxNormalizer(np.full(2, 20.0), np.full(2, 480.0))}
+
+
+@pytest.fixture(autouse=True)
+def _one_torch_thread():
+    """Small ops: one thread is as fast, and immune to oversubscription on a shared CPU."""
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
+@pytest.fixture
+def saved(tmp_path):
+    torch.manual_seed(0)
+    policy = DiffusionPolicy(DiffusionPolicyConfig(unet=TINY, n_action_steps=6), NORMS)
+    path = save_checkpoint(policy, tmp_path / "ckpt", dataset_meta={"seed": 0, "n_episodes": 3},
+                           training={"steps": 7})
+    return policy, path
+
+
+def test_round_trip_gives_identical_predictions(saved):
+    policy, path = saved
+    loaded = load_checkpoint(path, device="cpu")
+    assert isinstance(loaded, DiffusionPolicy) and loaded.config == policy.config
+    obs = torch.rand(3, 2, 6) * 400
+    a = policy.predict_chunk(obs, generator=torch.Generator().manual_seed(1))
+    b = loaded.predict_chunk(obs, generator=torch.Generator().manual_seed(1))
+    assert torch.equal(a, b)
+    np.testing.assert_array_equal(loaded.normalizers["action"].low, NORMS["action"].low)
+    info = read_checkpoint_info(path)
+    assert info["policy_type"] == "diffusion" and info["training"]["steps"] == 7
+    assert info["dataset"]["n_episodes"] == 3 and info["weights"]["sha256"] == _sha256(path / "model.safetensors")
+    assert sorted(p.name for p in path.iterdir()) == ["config.json", "model.safetensors"]
+
+
+def test_overwrite_is_atomic_and_leaves_no_temporary_files(saved, tmp_path):
+    policy, path = saved
+    with torch.no_grad():
+        next(policy.parameters()).add_(1.0)
+    save_checkpoint(policy, path)
+    loaded = load_checkpoint(path, device="cpu")
+    assert torch.equal(next(loaded.parameters()), next(policy.parameters()))
+    assert [p.name for p in tmp_path.iterdir()] == ["ckpt"]
+
+
+def test_regression_round_trip(tmp_path):
+    policy = RegressionPolicy(RegressionPolicyConfig(unet=TINY), NORMS)
+    loaded = load_checkpoint(save_checkpoint(policy, tmp_path / "r"), device="cpu", expected_type="regression")
+    obs = np.random.default_rng(0).uniform(0, 400, (2, 2, 6)).astype(np.float32)
+    np.testing.assert_array_equal(policy.predict_chunk(obs), loaded.predict_chunk(obs))
+
+
+def _edit_config(path, fn):
+    info = json.loads((path / "config.json").read_text())
+    fn(info)
+    (path / "config.json").write_text(json.dumps(info))
+
+
+def test_refuses_truncated_weights(saved):
+    _, path = saved
+    w = path / "model.safetensors"
+    w.write_bytes(w.read_bytes()[:-100])
+    with pytest.raises(CheckpointError, match="sha256"):
+        load_checkpoint(path, device="cpu")
+    _edit_config(path, lambda i: i["weights"].update(sha256=_sha256(w)))  # even with a matching hash
+    with pytest.raises(CheckpointError, match="safetensors"):
+        load_checkpoint(path, device="cpu")
+
+
+def test_never_unpickles(saved):
+    policy, path = saved
+    w = path / "model.safetensors"
+    w.write_bytes(pickle.dumps(policy.state_dict()))
+    _edit_config(path, lambda i: i["weights"].update(sha256=_sha256(w)))
+    with pytest.raises(CheckpointError, match="safetensors"):
+        load_checkpoint(path, device="cpu")
+
+
+def test_refuses_shape_mismatch(saved):
+    _, path = saved
+    _edit_config(path, lambda i: i["config"]["unet"].update(down_dims=[16, 64]))
+    with pytest.raises(CheckpointError, match="shape"):
+        load_checkpoint(path, device="cpu")
+
+
+def test_refuses_wrong_or_unknown_policy_type(saved):
+    _, path = saved
+    with pytest.raises(CheckpointError, match="expected 'regression'"):
+        load_checkpoint(path, device="cpu", expected_type="regression")
+    _edit_config(path, lambda i: i.update(policy_type="transformer"))
+    with pytest.raises(CheckpointError, match="unknown policy type"):
+        load_checkpoint(path, device="cpu")
+
+
+def test_refuses_config_with_unknown_field_or_bad_value(saved):
+    _, path = saved
+    _edit_config(path, lambda i: i["config"].update(flux_capacitor=1))
+    with pytest.raises(CheckpointError, match="flux_capacitor"):
+        load_checkpoint(path, device="cpu")
+    _edit_config(path, lambda i: (i["config"].pop("flux_capacitor"), i["config"].update(n_action_steps=40)))
+    with pytest.raises(CheckpointError, match="n_action_steps=40"):
+        load_checkpoint(path, device="cpu")
+
+
+def test_refuses_missing_files_and_bad_json(saved, tmp_path):
+    _, path = saved
+    with pytest.raises(FileNotFoundError, match="not found"):
+        load_checkpoint(tmp_path / "nothing")
+    (path / "config.json").write_text("{not json")
+    with pytest.raises(CheckpointError, match="JSON"):
+        load_checkpoint(path)
+    (path / "config.json").unlink()
+    with pytest.raises(FileNotFoundError, match="config.json"):
+        load_checkpoint(path)
+
+
+def test_refuses_missing_weights_and_foreign_json(saved):
+    _, path = saved
+    (path / "model.safetensors").unlink()
+    with pytest.raises(FileNotFoundError, match="weights"):
+        load_checkpoint(path)
+    (path / "config.json").write_text(json.dumps({"format": "something-else"}))
+    with pytest.raises(CheckpointError, match="not a coursekit checkpoint"):
+        load_checkpoint(path)

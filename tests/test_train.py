@@ -1,0 +1,168 @@
+"""Trainer: LR schedule vs diffusers, EMA formula, determinism, budgets, batching, bad data, CLI smoke."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from coursekit.data import EpisodeDataset, SequenceWindows
+from coursekit.data.batches import EpochSampler, WindowBatcher
+from coursekit.nn.unet1d import UNet1DConfig
+from coursekit.policies.factory import make_pusht_policy
+from coursekit.train import EMA, TrainConfig, ema_decay, lr_factor, train
+
+TINY = UNet1DConfig(down_dims=(16, 32), kernel_size=3, n_groups=4, diffusion_step_embed_dim=16)
+
+
+@pytest.fixture(autouse=True)
+def _one_torch_thread():
+    """Small ops: one thread is as fast, and immune to oversubscription on a shared CPU."""
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
+def synthetic_pusht(n_episodes: int = 6, length: int = 30, seed: int = 0) -> EpisodeDataset:
+    rng = np.random.default_rng(seed)
+    episodes = []
+    for _ in range(n_episodes):
+        state = 250 + np.cumsum(rng.normal(0, 5, size=(length, 5)), axis=0)
+        state[:, 4] = np.cumsum(rng.normal(0, 0.3, size=length))
+        episodes.append({"state": state, "action": state[:, :2] + rng.normal(0, 3, size=(length, 2))})
+    return EpisodeDataset.from_episodes(episodes, {"seed": 0, "n_episodes": n_episodes, "env_id": "synthetic"})
+
+
+@pytest.mark.parametrize("warmup, total", [(500, 1500), (10, 100), (0, 50)])
+def test_lr_schedule_matches_diffusers_cosine_with_warmup(warmup, total):
+    from diffusers.optimization import get_cosine_schedule_with_warmup
+
+    opt = torch.optim.SGD([torch.nn.Parameter(torch.zeros(1))], lr=1.0)
+    sched = get_cosine_schedule_with_warmup(opt, num_warmup_steps=warmup, num_training_steps=total)
+    for step in range(total):
+        progress = (step - warmup) / max(1, total - warmup)
+        assert lr_factor(step, warmup, progress) == pytest.approx(opt.param_groups[0]["lr"], abs=1e-9), step
+        opt.step()
+        sched.step()
+
+
+def test_lr_schedule_closed_form_points():
+    assert lr_factor(0, 500, 0.0) == 0.0
+    assert lr_factor(250, 500, 0.0) == 0.5
+    assert lr_factor(500, 500, 0.0) == 1.0
+    assert lr_factor(900, 500, 0.5) == pytest.approx(0.5)
+    assert lr_factor(900, 500, 1.0) == pytest.approx(0.0)
+    assert lr_factor(900, 500, 0.7, "constant") == 1.0
+
+
+def test_ema_decay_formula():
+    for step in (0, 1, 2, 10, 100, 5000):
+        assert ema_decay(step) == pytest.approx(min(0.9999, 1 - (1 + step) ** -0.75))
+    assert ema_decay(0) == 0.0
+    assert ema_decay(10**9) == 0.9999
+    assert ema_decay(3, power=1.0, max_decay=0.5) == 0.5
+
+
+def test_ema_update_is_the_moving_average():
+    torch.manual_seed(0)
+    model = torch.nn.Linear(3, 2)
+    ema = EMA(model)
+    expected = model.weight.detach().clone()
+    for step in range(4):
+        with torch.no_grad():
+            model.weight.add_(torch.randn_like(model.weight))
+        ema.update(model, step)
+        d = 1 - (1 + step) ** -0.75
+        expected = d * expected + (1 - d) * model.weight.detach()
+    assert torch.allclose(ema.model.weight, expected, atol=1e-6)
+    assert not ema.model.weight.requires_grad
+
+
+def test_window_batcher_matches_sequence_windows_gather():
+    ds = synthetic_pusht()
+    obs = {"obs": ds["state"].astype(np.float32)}
+    b = WindowBatcher(obs, ds["action"], ds.episode_ends, batch_size=7, seed=3)
+    which = torch.tensor([0, 5, 17, len(b) - 1])
+    batch = b.batch(which)
+    windows = SequenceWindows.build(ds.episode_ends, 16, 2, 8)
+    o, a = windows.gather(obs["obs"], ds["action"], which.numpy())
+    np.testing.assert_allclose(batch["obs"].numpy(), o, rtol=1e-6)
+    np.testing.assert_allclose(batch["action"].numpy(), a.astype(np.float32), rtol=1e-6)
+    first = [x["action"] for _, x in zip(range(3), b)]
+    again = [x["action"] for _, x in zip(range(3), WindowBatcher(obs, ds["action"], ds.episode_ends, batch_size=7, seed=3))]
+    assert all(torch.equal(x, y) for x, y in zip(first, again))
+
+
+def test_epoch_sampler_visits_every_item_once_per_epoch():
+    it = iter(EpochSampler(10, 3, torch.Generator().manual_seed(0)))
+    epoch = torch.cat([next(it) for _ in range(3)])  # 3 full batches; the 10th item's batch is dropped
+    assert len(set(epoch.tolist())) == 9
+
+
+def test_nan_in_training_data_is_a_clear_error():
+    ds = synthetic_pusht()
+    action = ds["action"].copy()
+    action[13, 1] = np.nan
+    with pytest.raises(ValueError, match="NaN.*row 13"):
+        WindowBatcher({"obs": ds["state"]}, action, ds.episode_ends)
+
+
+def test_training_is_deterministic_by_seed():
+    ds = synthetic_pusht()
+    runs = []
+    for seed in (0, 0, 1):
+        policy, batches = make_pusht_policy("diffusion", ds, batch_size=16, seed=seed, unet=TINY)
+        cfg = TrainConfig(max_steps=12, warmup_steps=2, lr=1e-3, seed=seed, log_every=4, progress=False)
+        runs.append(train(policy, batches, cfg))
+    w = [torch.cat([p.flatten() for p in r.policy.parameters()]) for r in runs]
+    assert torch.equal(w[0], w[1]) and not torch.equal(w[0], w[2])
+    assert [h["loss"] for h in runs[0].history] == [h["loss"] for h in runs[1].history]
+    s = runs[0].summary
+    assert s["steps"] == 12 and s["samples"] == 12 * 256 and s["complete"]
+    # EMA weights differ from the raw ones and are what the result hands back
+    raw = torch.cat([p.flatten() for p in runs[0].raw_policy.parameters()])
+    assert not torch.equal(raw, w[0]) and not runs[0].policy.training
+
+
+def test_time_budget_stops_the_run_and_checkpoints(tmp_path):
+    ds = synthetic_pusht()
+    policy, batches = make_pusht_policy("regression", ds, batch_size=8, unet=TINY)
+    cfg = TrainConfig(minutes=0.02, warmup_steps=0, progress=False, ema=False)
+    result = train(policy, batches, cfg, out_dir=tmp_path / "ckpt", dataset_meta=ds.meta)
+    assert 1 <= result.summary["steps"] and result.summary["seconds"] < 30
+    info = json.loads((tmp_path / "ckpt" / "config.json").read_text())
+    assert info["training"]["steps"] == result.summary["steps"] and info["dataset"]["env_id"] == "synthetic"
+    assert result.policy is policy  # no EMA: the trained policy itself
+
+
+def test_train_config_validation_shows_bad_value():
+    with pytest.raises(ValueError, match="max_steps or minutes"):
+        TrainConfig()
+    with pytest.raises(ValueError, match="-3"):
+        TrainConfig(max_steps=-3)
+    with pytest.raises(ValueError, match="lr_schedule"):
+        TrainConfig(max_steps=3, lr_schedule="step")
+
+
+def test_cli_train_then_eval_smoke(tmp_path, capsys):
+    """`coursekit train` a few steps on a tiny dataset, then `coursekit eval` 2 short episodes."""
+    from coursekit.cli import main
+
+    data = tmp_path / "demos.npz"
+    synthetic_pusht().save(data)
+    out = tmp_path / "ckpt"
+    assert main(["train", "--policy", "diffusion", "--data", str(data), "--steps", "2", "--batch-size", "4",
+                 "--out", str(out), "--no-progress", "--warmup-steps", "1"]) == 0
+    assert (out / "model.safetensors").is_file() and (out / "config.json").is_file()
+    summary_file = tmp_path / "eval.json"
+    assert main(["eval", str(out), "--episodes", "2", "--max-steps", "3", "--steps", "2", "--no-progress",
+                 "--json", str(summary_file)]) == 0
+    summary = json.loads(summary_file.read_text())
+    assert summary["episodes"] == 2 and 0.0 <= summary["score"] <= 1.0 and summary["num_inference_steps"] == 2
+    assert main(["eval", str(tmp_path / "nope"), "--no-progress"]) == 2  # clear error, no traceback
+    assert "not found" in capsys.readouterr().err
+    assert not math.isnan(summary["ms_per_chunk"])
