@@ -16,6 +16,7 @@ from coursekit.grading.grade import grade_submissions
 from coursekit.grading.paths import repo_root
 from coursekit.grading.runner import Limits, _interpret, RunResult
 
+pytestmark = pytest.mark.slow  # ~20 subprocesses, two of them endless loops: ~30-60 s on 2 busy cores
 CORPUS = Path(__file__).parent / "grading_corpus"
 # short limits keep the run bounded: the two endless loops cost ~1 s per test / the 12 s budget
 LIMITS = Limits(timeout_s=12, test_timeout_s=1, memory_mb=512)
@@ -36,6 +37,7 @@ EXPECTED = {
     "delete_files": (10, "ok", "Total: **10 / 10**"),
     "forge_results": (0, "ok", "I did not do it"),
     "tamper_tests": (0, "tampered", "tampering with the grader detected"),
+    "tamper_reference": (0, "tampered", "SequenceWindows: 'build' was replaced"),
     "wrong_types": (0, "ok", "expected (W, 16)"),
     # dies on short episodes only: test_short_episode_gets_one_window (1) and test_windows_stay_in_their_episode (2)
     # and the random-dataset test (1) are lost, the rest keep their points in fresh subprocesses
@@ -111,7 +113,7 @@ def test_nothing_forged_or_left_behind(graded):
 
 
 def test_regrading_gives_identical_files(tmp_path):
-    names = ["print_flood", "exit_on_short_episode", "off_by_padding", "tamper_tests", "syntax_error", "zipped"]
+    names = ["exit_on_short_episode", "tamper_tests", "syntax_error", "zipped"]
     subs = _submissions(tmp_path, names)
     outs = [tmp_path / "first", tmp_path / "second"]
     for out in outs:

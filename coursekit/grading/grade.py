@@ -80,12 +80,13 @@ def _student_id(name: str, taken: set[str]) -> str:
     return candidate
 
 
-def discover(submissions: Path) -> list[tuple[str, Path]]:
-    """(student id, folder or zip) for every submission, sorted by name."""
+def discover(submissions: Path, out: Path | None = None) -> list[tuple[str, Path]]:
+    """(student id, folder or zip) for every submission, sorted by name (``out`` is skipped)."""
     if not submissions.is_dir():
         raise FileNotFoundError(f"submissions folder {str(submissions)!r} does not exist")
+    skip = out.resolve() if out is not None else None
     entries = [p for p in sorted(submissions.iterdir()) if not p.name.startswith(".")
-               and (p.is_dir() or p.suffix.lower() == ".zip")]
+               and (p.is_dir() or p.suffix.lower() == ".zip") and p.resolve() != skip]
     taken: set[str] = {"grades.csv"}  # never collide with the class CSV
     return [(_student_id(p.stem if p.is_file() else p.name, taken), p) for p in entries]
 
@@ -150,7 +151,7 @@ def grade_submissions(submissions: str | Path, out: str | Path, exercises: list[
     limits = limits or Limits()
     chosen = [get_exercise(e) for e in exercises] if exercises else list(EXERCISES)
     submissions, out = Path(submissions), Path(out)
-    entries = discover(submissions)
+    entries = discover(submissions, out)
     root = repo_root()
     sources = read_test_sources(chosen, root)
     before = _fingerprint(root, chosen)

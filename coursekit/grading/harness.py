@@ -30,7 +30,7 @@ def _tail(text: str, limit: int = MAX_TEXT) -> str:
     return text if len(text) <= limit else "...\n" + text[-limit:]
 
 
-def _first_line(text: str, limit: int = 300) -> str:
+def _first_line(text: str, limit: int = 200) -> str:
     """The first few non-empty lines joined into one (numpy's messages start with a bare "AssertionError:")."""
     line = " ".join(ln.strip() for ln in text.strip().splitlines() if ln.strip())
     return line if len(line) <= limit else line[:limit] + "..."
@@ -51,6 +51,24 @@ class _Channel:
             except OSError:  # parent gone or fd closed by student code: nothing more to report
                 return
             view = view[written:]
+
+
+class _FunctionParts:
+    """Live mapping view of the parts of a function that patching would replace."""
+
+    _PARTS = ("__code__", "__defaults__", "__kwdefaults__", "__wrapped__")
+
+    def __init__(self, function) -> None:
+        self._function = function
+
+    def items(self):
+        return [(k, getattr(self._function, k)) for k in self._PARTS if hasattr(self._function, k)]
+
+    def __contains__(self, key: str) -> bool:
+        return hasattr(self._function, key)
+
+    def __getitem__(self, key: str):
+        return getattr(self._function, key)
 
 
 def _snapshot(namespaces: dict[str, dict]) -> dict[str, dict[str, int]]:
@@ -85,6 +103,16 @@ class ReportPlugin:
             if name in sys.modules:
                 self.namespaces[name] = sys.modules[name].__dict__
         self.namespaces["grading plugin"] = type(self).__dict__
+        # one level deeper for what the tests call: the code of their functions (a reference
+        # implementation imported by name) and the attributes of classes they use
+        for label, ns in list(self.namespaces.items()):
+            if not label.startswith(("test module", "conftest")):
+                continue
+            for key, value in list(ns.items()):
+                if isinstance(value, type):
+                    self.namespaces[f"{label}.{key}"] = value.__dict__
+                elif callable(value) and hasattr(value, "__code__"):
+                    self.namespaces[f"{label}.{key}"] = _FunctionParts(value)
         self.snapshot = _snapshot(self.namespaces)
         # "<file>::<test>[<params>]": stable whatever pytest's rootdir makes of the node ids
         self.names = {item.nodeid: f"{item.path.name}::{item.name}" for item in session.items}
