@@ -27,7 +27,8 @@ end, the way a hand would. Everything is deterministic given the reset seed and 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -36,6 +37,9 @@ from coursekit.experts.pusht_clearance import local_to_world, point_distance, wo
 from coursekit.experts.pusht_config import ExpertConfig
 from coursekit.experts.pusht_push_search import Push, PushSearch
 from coursekit.experts.pusht_routes import ANTICLOCKWISE, CLOCKWISE, STRAIGHT, speed_profile_targets
+
+if TYPE_CHECKING:
+    from coursekit.data import EpisodeDataset
 
 __all__ = ["ExpertConfig", "EpisodeRecord", "PushTExpert", "collect_dataset"]
 
@@ -254,7 +258,75 @@ class _Recorder:
             self.step(target, phase)
 
     def record(self, choices: list[dict], bumps: int) -> EpisodeRecord:
+        if not self.rows:  # nothing to do (e.g. max_steps reached while settling)
+            return EpisodeRecord(np.empty((0, 5)), np.empty((0, 2)), np.empty(0), np.empty(0, np.int8),
+                                 self.success_step, choices, bumps)
         states, actions, coverage, phases = zip(*self.rows)
         return EpisodeRecord(states=np.stack(states), actions=np.stack(actions),
                              coverage=np.asarray(coverage), phases=np.asarray(phases, dtype=np.int8),
                              success_step=self.success_step, route_choices=choices, travel_bumps=bumps)
+
+
+# --------------------------------------------------------------------------------------------
+# A dataset of demonstrations
+# --------------------------------------------------------------------------------------------
+def collect_dataset(n_episodes: int, seed: int, progress: bool = True,
+                    config: ExpertConfig | None = None) -> EpisodeDataset:
+    """Run the expert on the seeded reference resets ``seed, seed + 1, ...`` and collect
+    ``n_episodes`` successful demonstrations (a failed seed, rare, is skipped and listed in
+    ``meta["failed_seeds"]``). Deterministic: the same arguments give identical arrays.
+
+    Arrays (N steps over all episodes; row t is the state BEFORE action t):
+        "state"    (N, 5) float64 [agent_x, agent_y, block_x, block_y, block_angle UNWRAPPED]
+        "action"   (N, 2) float64 pusher target (x, y)
+        "coverage" (N,)   float64 coverage of the row's state
+        "phase"    (N,)   int8 0 settle, 1 travel, 2 push, 3 rest (see ``PHASE_NAMES``)
+    Meta: env_id, obs_type, expert, expert_version, expert_config, seed, n_episodes,
+    episode_seeds, failed_seeds, success_steps, route_choices (per episode, one dict per coin
+    toss), rest_steps, coursekit_version. Pixel observations can be rendered from the stored
+    states afterwards (``coursekit.envs.pusht_render``).
+    """
+    import coursekit
+    from coursekit.data import EpisodeDataset
+    from coursekit.envs.pusht import PushTEnv
+    from tqdm.auto import tqdm
+
+    if isinstance(n_episodes, bool) or not isinstance(n_episodes, (int, np.integer)) or n_episodes < 1:
+        raise ValueError(f"n_episodes must be a positive int, got {n_episodes!r}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed must be a non-negative int, got {seed!r}")
+    expert = PushTExpert(config)
+    env = PushTEnv(obs_type="state", max_episode_steps=expert.config.max_steps)
+    episodes, meta_seeds, failed, success_steps, choices = [], [], [], [], []
+    max_attempts = 2 * int(n_episodes) + 10
+    with tqdm(total=int(n_episodes), desc="PushT expert", unit="episode", disable=not progress) as bar:
+        for attempt in range(max_attempts):
+            if len(episodes) == n_episodes:
+                break
+            episode_seed = int(seed) + attempt
+            rec = expert.run_episode(env, episode_seed)
+            if rec.success_step is None:
+                failed.append(episode_seed)
+                continue
+            episodes.append({"state": rec.states, "action": rec.actions,
+                             "coverage": rec.coverage, "phase": rec.phases})
+            meta_seeds.append(episode_seed)
+            success_steps.append(rec.success_step)
+            choices.append(rec.route_choices)
+            bar.update(1)
+    if len(episodes) < n_episodes:
+        raise RuntimeError(f"the expert solved only {len(episodes)} of {max_attempts} resets from seed {seed}; "
+                           f"failed seeds: {failed[:20]}")
+    meta = {
+        "env_id": "coursekit/PushT-v0", "obs_type": "state",
+        "expert": EXPERT_NAME, "expert_version": EXPERT_VERSION,
+        "expert_config": asdict(expert.config),
+        "seed": int(seed), "n_episodes": int(n_episodes),
+        "episode_seeds": meta_seeds, "failed_seeds": failed, "success_steps": success_steps,
+        "route_choices": choices, "rest_steps": expert.config.rest_steps,
+        "phase_names": list(PHASE_NAMES),
+        "state_columns": ["agent_x", "agent_y", "block_x", "block_y", "block_angle_unwrapped"],
+        "action_columns": ["target_x", "target_y"],
+        "coursekit_version": coursekit.__version__,
+    }
+    return EpisodeDataset.from_episodes(episodes, meta)
