@@ -7,8 +7,8 @@ its ports. So this module starts the server itself (same command line as meshcat
 
 - kills it in :meth:`MeshcatScene.close` (also registered with ``atexit``, and run by ``with``);
 - asks Linux to SIGKILL it when the parent dies (``prctl(PR_SET_PDEATHSIG)``), so even a SIGKILLed
-  kernel leaves no server behind. Caveat: the signal fires when the *thread* that started the
-  server ends, so create the scene from the main thread (notebooks, scripts and pytest all do).
+  kernel leaves no server behind. The signal fires when the *thread* that started the server
+  ends, so it is only requested from the main thread (where notebooks, scripts and pytest run).
 
 Everything the course shows is exported with :meth:`MeshcatScene.static_html`: one self-contained
 HTML file (about 0.9 MB; three.js is inlined) with the scene and its animation, which works
@@ -30,6 +30,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -37,6 +38,7 @@ from typing import ClassVar
 
 import meshcat
 import numpy as np
+import zmq
 
 from coursekit.io import atomic_write_text
 
@@ -45,6 +47,8 @@ CAMERA_PATH = "/Cameras/default/rotated/<object>"
 # Seconds to wait for the server to print its URLs before giving up.
 _START_TIMEOUT_S = 30.0
 _PR_SET_PDEATHSIG = 1  # from <linux/prctl.h>
+# Milliseconds to wait for the server's reply to one command (static_html of a big scene included).
+_REPLY_TIMEOUT_MS = 60_000
 
 
 def _die_with_parent() -> None:
@@ -62,6 +66,7 @@ def _start_server() -> tuple[subprocess.Popen, str, str]:
     The same command line and environment as ``meshcat.servers.zmqserver.
     start_zmq_server_as_subprocess``, plus the parent-death signal and a start-up timeout.
     """
+    in_main_thread = threading.current_thread() is threading.main_thread()
     env = dict(os.environ)
     # meshcat passes its own location on PYTHONPATH (robust when it was added by sys.path hacks).
     env["PYTHONPATH"] = os.path.dirname(os.path.dirname(meshcat.__file__))
@@ -71,7 +76,9 @@ def _start_server() -> tuple[subprocess.Popen, str, str]:
         stderr=subprocess.DEVNULL,  # the server logs each websocket; nobody reads it, never let it block
         env=env,
         start_new_session=True,  # a Ctrl-C in a notebook cell must not take the server down
-        preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None,
+        # the parent-death signal fires when the STARTING THREAD ends: only ask for it from the
+        # main thread, or a server started from a worker thread would die with that thread
+        preexec_fn=_die_with_parent if sys.platform.startswith("linux") and in_main_thread else None,
     )
     deadline = time.monotonic() + _START_TIMEOUT_S
     zmq_url = web_url = None
@@ -140,6 +147,10 @@ class MeshcatScene:
             # prints the URL on stdout, which would only clutter notebooks and test logs.
             with contextlib.redirect_stdout(io.StringIO()):
                 self.vis = meshcat.Visualizer(zmq_url=zmq_url)
+            # meshcat waits for every reply without a limit: a dead server would hang the caller
+            # forever. With a timeout it raises zmq.Again instead (and the scene must be remade).
+            self.vis.window.zmq_socket.setsockopt(zmq.RCVTIMEO, _REPLY_TIMEOUT_MS)
+            self.vis.window.zmq_socket.setsockopt(zmq.SNDTIMEO, _REPLY_TIMEOUT_MS)
         except BaseException:
             self.close()
             raise
