@@ -118,6 +118,20 @@ EXERCISES: tuple[Exercise, ...] = (
         },
     ),
     Exercise(
+        id="receding_horizon",
+        chapter=5,
+        title="Receding-horizon execution of action chunks",
+        source="coursekit.execution.receding",
+        objects=("RecedingHorizon",),
+        tests={
+            "test_first_chunk_executes_pred_to_minus_1_onwards": (2, "Execute chunk[:, To-1 : To-1+Ta] in order; row b of the chunk is environment b's."),
+            "test_replans_every_ta_steps": (3, "Call the predictor only when all Ta planned actions are used up (and on the first act after reset)."),
+            "test_history_holds_newest_to_observations": (2, "Push each new obs into the history and drop the oldest; pass the newest To, oldest first."),
+            "test_reset_repeats_first_observation_and_forgets_plan": (2, "reset(obs): history = [obs] * To, and forget any plan left from the last episode."),
+            "test_works_with_torch_tensors": (1, "Only slice and index the chunk (chunk[:, i]); don't convert it to numpy."),
+        },
+    ),
+    Exercise(
         id="kl",
         chapter=7,
         title="The KL of a diagonal Gaussian to N(0, I) (ACT's CVAE regulariser)",
