@@ -181,9 +181,10 @@ class PushTMeshcat:
     def show_state(self, state, action=None) -> None:
         """Put the pusher, the block (and the target) at one state (5,) or (7,)."""
         s = _check_states(state)[0]
+        action = action if self.show_target else None
         for name, tf in self.transforms(s, action).items():
             self.scene.vis[ROOT][name].set_transform(tf)
-        if action is not None and self.show_target:
+        if action is not None:
             self.scene.vis[ROOT]["target"].set_property("visible", True)
 
     def animate(self, states, actions=None, fps: float = 10.0, play: bool = True, repetitions: int = 1) -> Animation:
@@ -213,9 +214,8 @@ class PushTMeshcat:
         anim = Animation(default_framerate=fps)
         for i in range(len(s)):
             with anim.at_frame(self.scene.vis, i) as frame:
-                for name, tf in self.transforms(s[i], None if actions is None else actions[i]).items():
-                    if name == "target" and not self.show_target:
-                        continue
+                action = actions[i] if actions is not None and self.show_target else None
+                for name, tf in self.transforms(s[i], action).items():
                     frame[ROOT][name].set_transform(tf)
         self.scene.vis.set_animation(anim, play=play, repetitions=repetitions)
         return anim
