@@ -192,16 +192,35 @@ def test_expert_is_deterministic(expert, env):
     assert a.route_choices == b.route_choices
 
 
-# A start where the T stands between the pusher and the push it wants, the two ways round about
-# equally long (found by trying the expert on a few hand-made starts).
-TWO_WAY_START = (100.0, 256.0, 300.0, 256.0, 3 * math.pi / 4)
+@pytest.fixture(scope="module")
+def two_way_runs(expert):
+    from coursekit.experts.pusht_planner import TWO_WAY_START
+    from coursekit.viz.expert_plots import expert_runs_from
+
+    return expert_runs_from(TWO_WAY_START, range(8), expert=expert)
 
 
-def test_coin_picks_both_sides_from_one_start(expert, env):
-    sides = set()
-    for coin in range(8):
-        rec = expert.run_episode(env, reset_state=TWO_WAY_START, coin_seed=coin)
+def test_coin_picks_both_sides_from_one_start(two_way_runs):
+    for rec in two_way_runs:
         assert rec.success_step is not None
-        if rec.route_choices:
-            sides.add(rec.route_choices[0]["taken"])
-    assert sides == {CLOCKWISE, ANTICLOCKWISE}
+        assert rec.route_choices and rec.route_choices[0]["step"] == 0  # a choice right away
+    assert {rec.route_choices[0]["taken"] for rec in two_way_runs} == {CLOCKWISE, ANTICLOCKWISE}
+    # Same start, different ways: the pusher paths really differ.
+    first = two_way_runs[0]
+    other = next(r for r in two_way_runs if r.route_choices[0]["taken"] != first.route_choices[0]["taken"])
+    n = min(len(first.states), len(other.states), 25)
+    assert np.abs(first.states[:n, :2] - other.states[:n, :2]).max() > 100.0
+
+
+def test_two_ways_figure(two_way_runs):
+    from matplotlib.figure import Figure
+
+    from coursekit.viz.expert_plots import SIDE_COLORS, plot_choice_summary, plot_two_ways
+
+    fig = plot_two_ways(records=two_way_runs)
+    assert isinstance(fig, Figure) and len(fig.axes) == 2
+    colours = {line.get_color() for line in fig.axes[0].lines}
+    assert {SIDE_COLORS["cw"], SIDE_COLORS["ccw"]} <= colours
+    summary = plot_choice_summary([r.route_choices for r in two_way_runs] + [[]])
+    heights = [p.get_height() for p in summary.axes[0].patches]
+    assert sum(heights) == 9 and heights[0] == 1

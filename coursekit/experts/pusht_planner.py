@@ -41,12 +41,17 @@ from coursekit.experts.pusht_routes import ANTICLOCKWISE, CLOCKWISE, STRAIGHT, s
 if TYPE_CHECKING:
     from coursekit.data import EpisodeDataset
 
-__all__ = ["ExpertConfig", "EpisodeRecord", "PushTExpert", "collect_dataset"]
+__all__ = ["TWO_WAY_START", "EpisodeRecord", "ExpertConfig", "PushTExpert", "collect_dataset"]
 
 EXPERT_NAME = "coursekit.experts.pusht_planner"
 EXPERT_VERSION = "1"
 COIN_STREAM = 0xC01
 """Mixed into the coin's seed so that the coin never shares a random stream with the reset."""
+
+TWO_WAY_START = (100.0, 256.0, 300.0, 256.0, 3 * math.pi / 4)
+"""A reset state [ax, ay, bx, by, angle] (``reset_to_state``, legacy order) where the T stands
+between the pusher and the push it wants, with both ways round about equally long: the coin
+decides, so expert runs from this one start split between clockwise and anticlockwise."""
 
 # Phase of each recorded step.
 SETTLE, TRAVEL, PUSH, REST = 0, 1, 2, 3
