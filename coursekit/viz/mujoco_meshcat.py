@@ -31,16 +31,21 @@ self-contained HTML file.
 from __future__ import annotations
 
 import os
-import re
-from collections.abc import Sequence
-from pathlib import Path
 
-import meshcat.geometry as g
-import mujoco
-import numpy as np
-from meshcat.animation import Animation, AnimationClip, AnimationTrack
+# This module draws nothing with MuJoCo, but it may be the first to import it: set the offscreen
+# backend the course's camera rendering needs BEFORE mujoco loads (it is read at import time).
+os.environ.setdefault("MUJOCO_GL", "egl")
 
-from coursekit.viz.meshcat_scene import MeshcatScene, pose_matrix, rgb_hex, shared_scene, translation
+import re  # noqa: E402
+from collections.abc import Sequence  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import meshcat.geometry as g  # noqa: E402
+import mujoco  # noqa: E402
+import numpy as np  # noqa: E402
+from meshcat.animation import Animation, AnimationClip, AnimationTrack  # noqa: E402
+
+from coursekit.viz.meshcat_scene import MeshcatScene, pose_matrix, rgb_hex, shared_scene, translation  # noqa: E402
 
 _T = mujoco.mjtGeom
 DEFAULT_RGBA = (0.5, 0.5, 0.5, 1.0)
