@@ -158,7 +158,8 @@ def test_bad_actions_raise_or_clip():
     assert env.data.ctrl[env.model.actuator("left/left_finger").id] == pytest.approx(0.058)
 
 
-def test_unstable_simulation_ends_episode_with_flag():
+def test_unstable_simulation_ends_episode_with_flag(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # MuJoCo appends its warning to MUJOCO_LOG.TXT in the working directory
     env = AlohaTransferCubeEnv()
     obs, _ = env.reset(seed=0)
     state = env.get_physics_state()
