@@ -16,7 +16,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--jobs", type=int, default=1, help="submissions graded in parallel (one subprocess each)")
     parser.add_argument("--timeout", type=float, default=120.0, help="wall-clock limit per student x exercise, seconds")
     parser.add_argument("--test-timeout", type=float, default=10.0, help="limit per test, seconds")
-    parser.add_argument("--memory-mb", type=int, default=3072, help="address-space cap per subprocess, MiB")
+    parser.add_argument("--memory-mb", type=int, default=2048, help="address-space cap per subprocess, MiB")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
