@@ -1,0 +1,276 @@
+"""ACT benchmarks: chunk latency vs Diffusion Policy, and trained success on both ALOHA tasks and PushT.
+
+Run everything (several hours on 2 cores: four 30-minute trainings plus evaluations)::
+
+    .venv/bin/python -m benchmarks.bench_act
+    .venv/bin/python -m benchmarks.bench_act --only latency             # ~1 minute
+    .venv/bin/python -m benchmarks.bench_act --only cube --minutes 30   # train + evaluate ACT on transfer cube
+    .venv/bin/python -m benchmarks.bench_act --only cube --checkpoint outputs/checkpoints/act_transfer_cube
+    .venv/bin/python -m benchmarks.bench_act --quick --no-record        # smoke run of every section
+
+Sections (``--only`` takes several):
+
+- ``latency``: batch-1 chunk latency of ACT (CPU default, k = 100, Da = 14) and Diffusion Policy
+  with DDIM-10 (CPU U-Net, To = 2, Tp = 16, Da = 14), alternating in one run (median of repeats),
+  plus the paper-size ACT; per-action cost with each one's executor (ACT + temporal ensembling
+  queries every step; DP executes Ta = 8 per chunk). Random weights: latency does not depend on them.
+- ``cube`` / ``insertion``: 50 scripted demonstrations (seeds 0..49), ACT trained for ``--minutes``
+  on ``--threads`` threads, then 50 held-out episodes (seeds 100000+) with temporal ensembling
+  on (m = 0.01) and off (open-loop chunks of k); per-stage rates and strict (final-state) success.
+- ``dp_cube``: Diffusion Policy (state features, DDIM-10, receding horizon Ta = 8) on transfer cube.
+- ``act_pusht``: ACT (k = 20, temporal ensembling) on PushT state features, evaluated by the
+  PushT protocol (mean-of-max coverage score, success rate; 50 held-out seeds).
+
+Every figure goes through ``benchmarks.results.record(section="ACT", ...)``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from benchmarks.results import record
+
+COMMAND = ".venv/bin/python -m benchmarks.bench_act"
+SECTION = "ACT"
+SECTIONS = ("latency", "cube", "insertion", "dp_cube", "act_pusht")
+TASK_LABEL = {"transfer_cube": "transfer cube", "insertion": "insertion"}
+COLLECT = {"transfer_cube": "collect_transfer_cube", "insertion": "collect_insertion"}
+
+
+def _median_ms(fn, repeats: int) -> list[float]:
+    out = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        out.append((time.perf_counter() - t0) * 1e3)
+    return out
+
+
+def bench_latency(args: argparse.Namespace) -> None:
+    """Batch-1 chunk latency, ACT vs DP DDIM-10, alternating repeats in one run."""
+    from coursekit.data.normalize import MeanStdNormalizer, MinMaxNormalizer
+    from coursekit.policies.act import ACTConfig, ACTPolicy
+    from coursekit.policies.diffusion import DiffusionPolicy, DiffusionPolicyConfig
+
+    Do, Da = 21, 14
+    torch.manual_seed(0)
+    act = ACTPolicy(ACTConfig(obs_dim=Do, action_dim=Da), {"obs": MeanStdNormalizer(np.zeros(Do), np.ones(Do)),
+                                                           "action": MeanStdNormalizer(np.zeros(Da), np.ones(Da))}).eval()
+    act_paper = ACTPolicy(ACTConfig.paper(obs_dim=Do, action_dim=Da), dict(act.normalizers)).eval()
+    dp = DiffusionPolicy(DiffusionPolicyConfig(features="aloha_state", obs_dim=Do, action_dim=Da),
+                         {"obs": MinMaxNormalizer(-np.ones(Do), np.ones(Do)),
+                          "action": MinMaxNormalizer(-np.ones(Da), np.ones(Da))}).eval()
+    act_obs, dp_obs = torch.zeros(1, 1, Do), torch.zeros(1, dp.config.n_obs_steps, Do)
+    g = torch.Generator().manual_seed(0)
+    runs = {"act": lambda: act.predict_chunk(act_obs), "act_paper": lambda: act_paper.predict_chunk(act_obs),
+            "dp": lambda: dp.predict_chunk(dp_obs, generator=g)}
+    for fn in runs.values():  # warm-up
+        for _ in range(2):
+            fn()
+    times: dict[str, list[float]] = {k: [] for k in runs}
+    for _ in range(args.repeats):
+        for name, fn in runs.items():
+            times[name] += _median_ms(fn, 1)
+    med = {k: statistics.median(v) for k, v in times.items()}
+    ratio = med["dp"] / med["act"]
+    ta = dp.config.n_action_steps
+    print(f"ACT cpu ({act.num_parameters() / 1e6:.2f} M, k={act.config.chunk_size}): {med['act']:.1f} ms/chunk; "
+          f"ACT paper ({act_paper.num_parameters() / 1e6:.1f} M): {med['act_paper']:.1f} ms; "
+          f"DP DDIM-10 ({dp.num_parameters() / 1e6:.2f} M, Tp={dp.config.horizon}): {med['dp']:.1f} ms; "
+          f"DP/ACT = {ratio:.1f}x; threads {torch.get_num_threads()}")
+    if args.no_record:
+        return
+    note = (f"batch 1, Do={Do}, Da={Da}, median of {args.repeats} alternating repeats in one run, random weights, "
+            f"{torch.get_num_threads()} torch threads")
+    record(SECTION, "ACT chunk latency (batch 1, cpu size, k=100)", round(med["act"], 2), "ms", f"{COMMAND} --only latency",
+           note=f"{act.num_parameters() / 1e6:.2f} M params; " + note)
+    record(SECTION, "ACT chunk latency (batch 1, paper size)", round(med["act_paper"], 1), "ms", f"{COMMAND} --only latency",
+           note=f"{act_paper.num_parameters() / 1e6:.1f} M params (no backbone); " + note)
+    record(SECTION, "DP DDIM-10 chunk latency (batch 1, same run)", round(med["dp"], 1), "ms", f"{COMMAND} --only latency",
+           note=f"cpu U-Net {dp.num_parameters() / 1e6:.2f} M, To=2, Tp=16; " + note)
+    record(SECTION, "DP DDIM-10 / ACT chunk latency", round(ratio, 1), "x", f"{COMMAND} --only latency", target=">= 5x",
+           note="same run; " + note)
+    record(SECTION, "ms per action: ACT + temporal ensembling vs DP (Ta=8)",
+           f"{med['act']:.1f} vs {med['dp'] / ta:.1f}", "ms", f"{COMMAND} --only latency",
+           note="ensembling queries ACT every step (1 chunk per action); DP re-plans every Ta = 8 steps")
+
+
+def _dataset(task: str, args: argparse.Namespace):
+    """50 scripted demonstrations (cached under --data-dir)."""
+    from coursekit.data import EpisodeDataset
+
+    n = 5 if args.quick else 50
+    path = Path(args.data_dir) / f"aloha_{task}_{n}ep_seed0.npz"
+    if path.exists():
+        return EpisodeDataset.load(path)
+    import coursekit.experts.aloha_scripted as scripted
+
+    ds = getattr(scripted, COLLECT[task])(n, 0, progress=not args.no_progress)
+    ds.save(path)
+    return ds
+
+
+def _train(policy: Any, batches: Any, config: Any, out: Path, meta: dict[str, Any]) -> dict[str, Any]:
+    from coursekit.train import train
+
+    result = train(policy, batches, config, out_dir=out, dataset_meta=meta)
+    return result.summary
+
+
+def _load_or_train_act(task: str, args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
+    from coursekit.checkpoint import load_checkpoint, read_checkpoint_info
+    from coursekit.policies.act_factory import act_train_config, make_act_policy
+
+    if args.checkpoint:
+        return load_checkpoint(args.checkpoint, device="cpu"), read_checkpoint_info(args.checkpoint)["training"]
+    ds = _dataset(task, args)
+    policy, batches = make_act_policy(ds, batch_size=16, seed=args.seed)
+    config = act_train_config(minutes=args.minutes, num_threads=args.threads, progress=not args.no_progress,
+                              checkpoint_every_minutes=5.0)
+    out = Path(args.ckpt_dir) / f"act_{task}"
+    summary = _train(policy, batches, config, out, {**ds.meta, "n_steps": ds.n_steps})
+    print(f"trained ACT on {task}: {json.dumps({k: summary[k] for k in ('steps', 'seconds', 'final_loss')})} -> {out}")
+    return load_checkpoint(out, device="cpu"), summary
+
+
+def bench_aloha_act(task: str, args: argparse.Namespace) -> None:
+    """Train (or load) ACT on an ALOHA task; evaluate with temporal ensembling on and off."""
+    from coursekit.evaluate_aloha import evaluate_aloha
+    from coursekit.execution.ensembling import TemporalEnsemble
+    from coursekit.execution.receding import RecedingHorizon
+
+    policy, summary = _load_or_train_act(task, args)
+    n = 3 if args.quick else args.episodes
+    k = policy.config.chunk_size
+    executors = {"temporal ensembling m=0.01": lambda pc: TemporalEnsemble(pc, 1, ensemble_decay=0.01),
+                 f"open-loop chunks (Ta=k={k})": lambda pc: RecedingHorizon(pc, 1, k)}
+    label = TASK_LABEL[task]
+    for name, factory in executors.items():
+        torch.set_num_threads(args.threads)
+        r = evaluate_aloha(policy, task, n_episodes=n, executor_factory=factory, progress=not args.no_progress,
+                           max_steps=60 if args.quick else 400)
+        rates = r.info["stage_rates"]
+        print(f"ACT {label}, {name}: strict {r.info['strict_success_rate']:.2f}, stages "
+              f"{[round(rates[s], 2) for s in range(1, 5)]}, {r.ms_per_chunk:.1f} ms/chunk (batch {n})")
+        if args.no_record:
+            continue
+        trained = (f"{summary.get('steps')} steps / {summary.get('seconds', 0) / 60:.1f} min on "
+                   f"{summary.get('torch_threads')} threads")
+        note = (f"{n} held-out episodes (seeds 100000+), stages 1-4 reached: "
+                f"{', '.join(f'{rates[s]:.2f}' for s in range(1, 5))}; trained {trained}")
+        target = (">= 80 % (30 min), ship >= 90 %" if task == "transfer_cube" else "ship >= 40 %") \
+            if name.startswith("temporal") else ""
+        cmd = f"{COMMAND} --only {'cube' if task == 'transfer_cube' else 'insertion'}"
+        record(SECTION, f"ACT {label} success, {name} (strict, final state)", round(100 * r.info["strict_success_rate"], 1),
+               "%", cmd, target=target, note=note)
+        record(SECTION, f"ACT {label} success, {name} (stage 4 at any step)", round(100 * rates[4], 1), "%", cmd, note=note)
+
+
+def bench_dp_cube(args: argparse.Namespace) -> None:
+    """Diffusion Policy on transfer cube with the same state features, receding horizon."""
+    from coursekit.checkpoint import load_checkpoint
+    from coursekit.data.act_batches import act_training_arrays
+    from coursekit.data.batches import WindowBatcher
+    from coursekit.evaluate_aloha import evaluate_aloha
+    from coursekit.policies.diffusion import DiffusionPolicy, DiffusionPolicyConfig
+    from coursekit.train import TrainConfig
+
+    ds = _dataset("transfer_cube", args)
+    obs, action = act_training_arrays(ds, "aloha_state")
+    config = DiffusionPolicyConfig(features="aloha_state", obs_dim=obs["obs"].shape[-1], action_dim=action.shape[-1])
+    torch.manual_seed(args.seed)
+    policy = DiffusionPolicy(config)
+    policy.fit_normalizers(obs, action)
+    batches = WindowBatcher(obs, action, ds.episode_ends, horizon=config.horizon, n_obs_steps=config.n_obs_steps,
+                            n_action_steps=config.n_action_steps, batch_size=256, seed=args.seed)
+    out = Path(args.ckpt_dir) / "dp_transfer_cube"
+    summary = _train(policy, batches, TrainConfig(minutes=args.minutes, batch_size=256, num_threads=args.threads,
+                                                  progress=not args.no_progress), out, ds.meta)
+    policy = load_checkpoint(out, device="cpu")
+    n = 3 if args.quick else args.episodes
+    r = evaluate_aloha(policy, "transfer_cube", n_episodes=n, progress=not args.no_progress,
+                       max_steps=60 if args.quick else 400)
+    rates = r.info["stage_rates"]
+    print(f"DP transfer cube: strict {r.info['strict_success_rate']:.2f}, stages {[rates[s] for s in range(1, 5)]}")
+    if not args.no_record:
+        record(SECTION, "DP transfer cube success (strict, DDIM-10, Ta=8)", round(100 * r.info["strict_success_rate"], 1),
+               "%", f"{COMMAND} --only dp_cube", note=f"{n} held-out episodes; stages 1-4: "
+               f"{', '.join(f'{rates[s]:.2f}' for s in range(1, 5))}; trained {summary['steps']} steps / "
+               f"{summary['seconds'] / 60:.1f} min, state features [qpos, cube pose]")
+
+
+def bench_act_pusht(args: argparse.Namespace) -> None:
+    """ACT on PushT state features (k = 20, temporal ensembling), PushT protocol."""
+    from coursekit.checkpoint import load_checkpoint
+    from coursekit.data import EpisodeDataset
+    from coursekit.evaluate import evaluate_pusht
+    from coursekit.policies.act_factory import act_train_config, make_act_policy
+
+    n_demo = 10 if args.quick else 200
+    path = Path(args.data_dir) / f"pusht_{n_demo}ep_seed0.npz"
+    if path.exists():
+        ds = EpisodeDataset.load(path)
+    else:
+        from coursekit.experts.pusht_planner import collect_dataset
+
+        ds = collect_dataset(n_demo, 0, progress=not args.no_progress)
+        ds.save(path)
+    policy, batches = make_act_policy(ds, features="pusht_state", batch_size=16, seed=args.seed, chunk_size=20)
+    out = Path(args.ckpt_dir) / "act_pusht"
+    summary = _train(policy, batches, act_train_config(minutes=args.minutes, num_threads=args.threads,
+                                                       progress=not args.no_progress), out, ds.meta)
+    policy = load_checkpoint(out, device="cpu")
+    n = 3 if args.quick else args.episodes
+    r = evaluate_pusht(policy, n_episodes=n, dataset_meta=ds.meta, progress=not args.no_progress,
+                       max_steps=30 if args.quick else 300)
+    print(f"ACT PushT: score {r.score:.3f}, success {r.success_rate:.2f}")
+    if not args.no_record:
+        note = f"{n} held-out seeds, k=20, temporal ensembling m=0.01; trained {summary['steps']} steps / {summary['seconds'] / 60:.1f} min"
+        record(SECTION, "ACT PushT score (mean of max coverage)", round(r.score, 3), "", f"{COMMAND} --only act_pusht", note=note)
+        record(SECTION, "ACT PushT success rate", round(100 * r.success_rate, 1), "%", f"{COMMAND} --only act_pusht", note=note)
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--only", nargs="+", choices=SECTIONS, default=list(SECTIONS), help="sections to run")
+    parser.add_argument("--minutes", type=float, default=30.0, help="training budget per policy (default 30)")
+    parser.add_argument("--threads", type=int, default=2, help="torch threads for training and evaluation (default 2)")
+    parser.add_argument("--episodes", type=int, default=50, help="held-out evaluation episodes (default 50)")
+    parser.add_argument("--repeats", type=int, default=15, help="latency repeats (default 15)")
+    parser.add_argument("--seed", type=int, default=0, help="training seed (default 0)")
+    parser.add_argument("--checkpoint", default=None, help="evaluate this ACT checkpoint instead of training (cube/insertion)")
+    parser.add_argument("--data-dir", default="outputs/data", help="where demonstrations are cached")
+    parser.add_argument("--ckpt-dir", default="outputs/checkpoints", help="where trained checkpoints are written")
+    parser.add_argument("--quick", action="store_true", help="tiny data/budgets: a smoke run of the script, not a measurement")
+    parser.add_argument("--no-record", action="store_true", help="print only, do not write results.json")
+    parser.add_argument("--no-progress", action="store_true", help="hide progress bars")
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.minutes = min(args.minutes, 0.5)
+        args.repeats = min(args.repeats, 3)
+    Path(args.data_dir).mkdir(parents=True, exist_ok=True)
+    for section in args.only:
+        t0 = time.perf_counter()
+        if section == "latency":
+            bench_latency(args)
+        elif section == "cube":
+            bench_aloha_act("transfer_cube", args)
+        elif section == "insertion":
+            bench_aloha_act("insertion", args)
+        elif section == "dp_cube":
+            bench_dp_cube(args)
+        elif section == "act_pusht":
+            bench_act_pusht(args)
+        print(f"-- {section} done in {time.perf_counter() - t0:.0f} s", flush=True)
+
+
+if __name__ == "__main__":
+    main()
