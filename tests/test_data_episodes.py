@@ -97,3 +97,13 @@ def test_zip_container_is_a_real_npz(tmp_path):
     with zipfile.ZipFile(path) as zf:
         assert zf.testzip() is None
         assert {"obs.npy", "action.npy", "episode_ends.npy", "__meta__.npy"} <= set(zf.namelist())
+
+
+def test_saved_file_has_ordinary_permissions(tmp_path):
+    import os
+    import stat
+
+    umask = os.umask(0)
+    os.umask(umask)
+    path = _dataset().save(tmp_path / "demo.npz")
+    assert stat.S_IMODE(path.stat().st_mode) == 0o666 & ~umask
