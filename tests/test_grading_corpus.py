@@ -18,8 +18,9 @@ from coursekit.grading.runner import Limits, _interpret, RunResult
 
 pytestmark = pytest.mark.slow  # ~20 subprocesses, two of them endless loops: ~30-60 s on 2 busy cores
 CORPUS = Path(__file__).parent / "grading_corpus"
-# short limits keep the run bounded: the two endless loops cost ~1 s per test / the 12 s budget
-LIMITS = Limits(timeout_s=12, test_timeout_s=1, memory_mb=512)
+# short limits keep the run bounded: the two endless loops cost ~1 s per test / the 20 s budget
+# (the budget also covers the fresh subprocesses after each crash, slow when the machine is busy)
+LIMITS = Limits(timeout_s=20, test_timeout_s=1, memory_mb=512)
 
 # student -> (points out of 10, status, text that must appear in the feedback)
 EXPECTED = {
@@ -28,8 +29,8 @@ EXPECTED = {
     "syntax_error": (0, "ok", "SyntaxError: expected ':'"),
     "import_error": (0, "ok", "ModuleNotFoundError: No module named 'a_module_that_does_not_exist'"),
     "infinite_loop": (0, None, "Timeout (>1.0s)"),
-    "hang_ignoring_timeout": (0, "timeout", "took longer than 12 s"),
-    "huge_allocation": (0, None, "MemoryError"),
+    "hang_ignoring_timeout": (0, "timeout", "took longer than 20 s"),
+    "huge_allocation": (0, "ok", "MemoryError"),
     "os_exit": (0, "crashed", "exited early with code 0"),
     "exit_at_import": (0, "crashed", "exited early with code 3"),
     "sys_exit": (0, "ok", "SystemExit: 0"),
@@ -84,8 +85,8 @@ def test_every_student_gets_the_expected_row(graded):
         feedback = (out / student / "feedback.md").read_text()
         assert text in feedback, f"{student}: {text!r} not in feedback:\n{feedback[:3000]}"
     assert summary.warnings == []
-    # bounded: the budget is dominated by the two endless loops (see LIMITS)
-    assert summary.seconds < 110
+    # bounded (loose: the machine may be busy): the budget is dominated by the endless loops
+    assert summary.seconds < 300
 
 
 def test_gradescope_results_json(graded):
@@ -118,7 +119,7 @@ def test_regrading_gives_identical_files(tmp_path):
     outs = [tmp_path / "first", tmp_path / "second"]
     for out in outs:
         assert main(["grade", str(subs), "--out", str(out), "--exercise", "chunk_windows", "--jobs", "2",
-                     "--timeout", "12", "--test-timeout", "2", "--memory-mb", "512", "--no-progress"]) == 0
+                     "--timeout", "30", "--test-timeout", "5", "--memory-mb", "512", "--no-progress"]) == 0
     first = {p.relative_to(outs[0]): p.read_bytes() for p in outs[0].rglob("*") if p.is_file()}
     second = {p.relative_to(outs[1]): p.read_bytes() for p in outs[1].rglob("*") if p.is_file()}
     assert first == second and len(first) == 1 + 2 * len(names)
