@@ -81,10 +81,11 @@ def success_rates(task: str, n_seeds: int) -> dict[str, float]:
     return {"strict": strict / n_seeds, "lenient": lenient / n_seeds, "ee_strict": ee_strict / n_seeds, "failed": failed}
 
 
-def generation_seconds(task: str, n_episodes: int = 50) -> float:
-    t0 = time.perf_counter()
+def generation_seconds(task: str, n_episodes: int = 50) -> tuple[float, float]:
+    """(wall, CPU) seconds to collect ``n_episodes`` strictly successful demonstrations."""
+    t0, c0 = time.perf_counter(), time.process_time()
     collect(task, n_episodes, seed=0, progress=False)
-    return time.perf_counter() - t0
+    return time.perf_counter() - t0, time.process_time() - c0
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -122,10 +123,11 @@ def main(argv: list[str] | None = None) -> None:
         put(SECTION, f"scripted strict success before replay (mocap), {TASK_LABEL[task]}", round(100 * rates["ee_strict"], 1),
             "%", COMMAND, note=note.replace("after joint-space replay", "in the end-effector scene"))
     for task in ("transfer_cube", "insertion"):
-        seconds = generation_seconds(task)
-        print(f"{task}: 50 demonstrations in {seconds:.1f} s")
+        seconds, cpu = generation_seconds(task)
+        print(f"{task}: 50 demonstrations in {seconds:.1f} s wall clock, {cpu:.1f} s CPU")
         put(SECTION, f"50 demos generation time, {TASK_LABEL[task]}", round(seconds, 1), "s", COMMAND, target="< 30",
-            note="coursekit collect aloha-cube|aloha-insertion without file writing; shared 2-core machine")
+            note=f"coursekit collect aloha-cube|aloha-insertion without file writing, one process; {cpu:.1f} s CPU "
+                 f"time; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
 
 
 if __name__ == "__main__":
