@@ -20,7 +20,7 @@ pytestmark = pytest.mark.slow  # ~20 subprocesses, two of them endless loops: ~3
 CORPUS = Path(__file__).parent / "grading_corpus"
 # short limits keep the run bounded: the two endless loops cost ~1 s per test / the 20 s budget
 # (the budget also covers the fresh subprocesses after each crash, slow when the machine is busy)
-LIMITS = Limits(timeout_s=20, test_timeout_s=1, memory_mb=512)
+LIMITS = Limits(timeout_s=20, test_timeout_s=1, memory_mb=512, output_mb=8)
 
 # student -> (points out of 10, status, text that must appear in the feedback)
 EXPECTED = {
@@ -35,6 +35,7 @@ EXPECTED = {
     "exit_at_import": (0, "crashed", "exited early with code 3"),
     "sys_exit": (0, "ok", "SystemExit: 0"),
     "print_flood": (10, "ok", "Total: **10 / 10**"),
+    "print_forever": (0, "ok", "more than the 8 MiB output limit"),
     "delete_files": (10, "ok", "Total: **10 / 10**"),
     "forge_results": (0, "ok", "I did not do it"),
     "tamper_tests": (0, "tampered", "tampering with the grader detected"),

@@ -353,7 +353,10 @@ def _interpret(data: bytes, nonce: str, returncode: int | None, limits: Limits, 
             test = str(message.get("test"))
             if test in outcomes:
                 continue  # only the first report of a test counts
-            outcomes[test] = Outcome(test, str(message.get("outcome", "failed")), str(message.get("message", "")),
+            text = str(message.get("message", ""))
+            if "[Errno 27] File too large" in text:  # RLIMIT_FSIZE: Python ignores SIGXFSZ, writes fail
+                text += f" (printed or wrote more than the {limits.output_mb} MiB output limit)"
+            outcomes[test] = Outcome(test, str(message.get("outcome", "failed")), text,
                                      str(message.get("detail", "")), str(message.get("output", "")))
             tampered = tampered or str(message.get("tampered") or "")
             running = None
