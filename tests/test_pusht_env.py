@@ -189,3 +189,47 @@ def test_import_is_light():
     code = "import coursekit.envs.pusht, sys; print(any(m in sys.modules for m in ('torch', 'mujoco', 'meshcat')))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def _reference_world(start):
+    """The reference world built directly from pusht.md with pymunk (independently of the env)."""
+    import pymunk
+
+    space = pymunk.Space()
+    space.gravity, space.damping = (0, 0), 0.0
+    for a, b in [((5, 506), (5, 5)), ((5, 5), (506, 5)), ((506, 5), (506, 506)), ((5, 506), (506, 506))]:
+        space.add(pymunk.Segment(space.static_body, a, b, 2))
+    agent = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+    agent_shape = pymunk.Circle(agent, 15)
+    block = pymunk.Body(1, 3000)
+    shapes = [pymunk.Poly(block, [(-60, 30), (60, 30), (60, 0), (-60, 0)]),
+              pymunk.Poly(block, [(-15, 30), (15, 30), (15, 120), (-15, 120)])]
+    block.center_of_gravity = (0, 45)
+    space.add(agent, agent_shape, block, *shapes)
+    agent.position = tuple(start[:2])
+    block.position = tuple(start[2:4])  # legacy order: position, then angle
+    block.angle = start[4]
+    space.step(0.01)
+    return space, agent, block
+
+
+def test_dynamics_match_an_independent_reference_build():
+    start = [256.0, 420.0, 250.0, 250.0, 0.4]
+    space, agent, block = _reference_world(start)
+    env = PushTEnv()
+    env.reset(options={"reset_to_state": start})
+    targets = [[256.0, 420.0 - 15 * k] for k in range(15)] + [[300.0, 200.0]] * 5
+    for a in targets:
+        for _ in range(10):
+            agent.velocity += (100 * (pymunk_vec(a) - agent.position) + 20 * (pymunk_vec((0, 0)) - agent.velocity)) * 0.01
+            space.step(0.01)
+        env.step(a)
+    ref = [*agent.position, *block.position, block.angle]
+    np.testing.assert_allclose(env.get_state()[:5], ref, rtol=0, atol=1e-9)
+    assert abs(ref[4] - 0.4) > 0.05 or np.linalg.norm(np.subtract(ref[2:4], start[2:4])) > 5  # contact happened
+
+
+def pymunk_vec(a):
+    import pymunk
+
+    return pymunk.Vec2d(*a)

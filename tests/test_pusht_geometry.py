@@ -5,6 +5,8 @@ import math
 import numpy as np
 import pytest
 import shapely
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from shapely.geometry import MultiPolygon, Polygon
 
 from coursekit.envs import pusht_geometry as geo
@@ -71,3 +73,13 @@ def test_bad_pose_raises():
         geo.block_polygons((1.0, 2.0))
     with pytest.raises(ValueError, match="finite"):
         geo.coverage((float("nan"), 0.0, 0.0))
+
+
+@settings(max_examples=60, deadline=None)
+@given(x=st.floats(150, 360), y=st.floats(150, 360), a=st.floats(-10, 10))
+def test_coverage_properties(x, y, a):
+    cov = geo.coverage((x, y, a))
+    assert 0.0 <= cov <= 1.0 + 1e-12
+    assert geo.coverage((x, y, a + 2 * math.pi)) == pytest.approx(cov, abs=1e-9)  # angle wraps
+    # symmetric: area(A & B) / area(T) does not depend on which one is the goal
+    assert geo.coverage(geo.GOAL_POSE, goal_pose=(x, y, a)) == pytest.approx(cov, abs=1e-9)
