@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import json
 import os
-import resource
 import sys
 from typing import Any
 
@@ -161,14 +160,25 @@ class ReportPlugin:
 
 
 def _apply_limits(memory_mb: int, file_mb: int) -> None:
-    """Caps for this process and its children: address space, file size, no core dumps."""
+    """Caps for this process and its children: address space, file size, no core dumps.
+
+    A platform that refuses a limit (macOS does not enforce RLIMIT_AS) keeps going: the parent
+    still polls the memory of the whole process tree and enforces the wall clock.
+    """
+    try:
+        import resource
+    except ImportError:  # not a POSIX system
+        return
+    limits = [(resource.RLIMIT_CORE, 0)]
     if memory_mb > 0:
-        limit = memory_mb * 1024 * 1024
-        resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
-    if file_mb > 0:
-        limit = file_mb * 1024 * 1024  # Python ignores SIGXFSZ: oversized writes raise OSError
-        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
-    resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
+        limits.append((resource.RLIMIT_AS, memory_mb * 1024 * 1024))
+    if file_mb > 0:  # Python ignores SIGXFSZ, so oversized writes raise OSError (EFBIG)
+        limits.append((resource.RLIMIT_FSIZE, file_mb * 1024 * 1024))
+    for which, value in limits:
+        try:
+            resource.setrlimit(which, (value, value))
+        except (ValueError, OSError):
+            pass
 
 
 def main() -> int:
