@@ -17,6 +17,7 @@ from coursekit.data import ActionChunks, EpisodeDataset  # noqa: E402
 from coursekit.experts.aloha_scripted import (  # noqa: E402
     EPISODE_STEPS,
     ScriptConfig,
+    collect,
     collect_transfer_cube,
     scripted_episode,
 )
@@ -68,7 +69,7 @@ def test_scripted_episode_succeeds_strictly_after_replay(task, env_cls, seed):
 
 
 def test_collect_round_trip_deterministic_and_chunkable(tmp_path):
-    data = collect_transfer_cube(2, seed=5, progress=False)
+    data = collect_transfer_cube(2, seed=5, progress=False)  # default: up to 2 worker processes
     assert data.n_episodes == 2 and data.meta["env_id"] == "coursekit/AlohaTransferCube-v0"
     assert data.meta["strict_successes"] >= 2 and data.meta["episode_seeds"][0] == 5
     for key, dim in (("qpos", 14), ("qvel", 14), ("action", 14), ("env_state", 7)):
@@ -91,6 +92,6 @@ def test_collect_round_trip_deterministic_and_chunkable(tmp_path):
     chunks = ActionChunks.build(loaded.episode_ends, chunk_size=100)
     obs_b, act_b, pad_b = chunks.gather(loaded["qpos"], loaded["action"], np.array([0, len(chunks) - 1]))
     assert act_b.shape == (2, 100, 14) and pad_b[1, 1:].all() and not pad_b[0].any()
-    # same seed, same data
-    again = collect_transfer_cube(1, seed=5, progress=False)
+    # same seed, same data, whether collected by worker processes or in this one
+    again = collect("transfer_cube", 1, seed=5, progress=False, workers=1)
     np.testing.assert_array_equal(again["action"], data.episode(0)["action"])

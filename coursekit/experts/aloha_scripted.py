@@ -27,6 +27,9 @@ Dataset arrays (per control step, episodes concatenated; see ``coursekit.data.Ep
 
 from __future__ import annotations
 
+import multiprocessing
+import os
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -259,39 +262,67 @@ def scripted_episode(task: str, seed: int, cfg: ScriptConfig = ScriptConfig(), e
     return replay(env, env_state, joint_actions(ee)), ee
 
 
+def _run_seeds(task: str, seeds: list[int], cfg: ScriptConfig) -> list[tuple[int, dict[str, np.ndarray]]]:
+    """Scripted episodes for ``seeds`` with one env and scene (a worker's unit of work)."""
+    env, scene = AlohaEnv(task), EndEffectorScene(task)
+    out = [(s, scripted_episode(task, s, cfg, env, scene)[0]) for s in seeds]
+    env.close()
+    return out
+
+
 def collect(task: str, n_episodes: int, seed: int = 0, progress: bool = True, cfg: ScriptConfig = ScriptConfig(),
-            max_attempts: int | None = None) -> EpisodeDataset:
+            max_attempts: int | None = None, workers: int | None = None) -> EpisodeDataset:
     """``n_episodes`` strictly successful scripted demonstrations of ``task`` as a dataset.
 
     Attempt ``i`` uses spawn seed ``seed + i``; failed replays are skipped (their seeds are listed
-    in ``meta["failed_seeds"]``) until ``n_episodes`` are kept or ``max_attempts`` (default
-    2 * n_episodes + 10) is reached, which raises RuntimeError. Deterministic in ``seed``.
+    in ``meta["failed_seeds"]``): the dataset holds the first ``n_episodes`` successful seeds, so it
+    is the same for any number of ``workers`` (processes; default: up to 2, one per core).
+    Raises RuntimeError after ``max_attempts`` (default 2 * n_episodes + 10) attempts.
     """
     if n_episodes < 1:
         raise ValueError(f"n_episodes must be >= 1, got {n_episodes}")
     max_attempts = max_attempts or 2 * n_episodes + 10
-    env, scene = AlohaEnv(task), EndEffectorScene(task)
+    workers = workers or min(2, os.cpu_count() or 1)
+    if workers < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
     kept, kept_seeds, failed_seeds, lenient = [], [], [], 0
     bar = tqdm(total=n_episodes, desc=f"aloha {task} demos", disable=not progress, unit="ep")
-    attempt = 0
-    while len(kept) < n_episodes:
-        if attempt >= max_attempts:
-            raise RuntimeError(f"only {len(kept)} of {n_episodes} {task} demonstrations succeeded in {max_attempts} attempts")
-        episode, _ = scripted_episode(task, seed + attempt, cfg, env, scene)
-        lenient += int(episode.pop("lenient_success"))
-        if bool(episode.pop("strict_success")):
-            kept.append(episode)
-            kept_seeds.append(seed + attempt)
-            bar.update(1)
-        else:
-            failed_seeds.append(seed + attempt)
-        attempt += 1
-    bar.close()
-    env.close()
+    next_seed, last_seed = seed, seed + max_attempts
+    # Fork (where the OS has it): the workers only step MuJoCo (no GL, no torch), and unlike spawn
+    # it does not re-run the caller's script, so collect() works from an unguarded script too.
+    if "fork" not in multiprocessing.get_all_start_methods():
+        workers = 1
+    pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")) if workers > 1 else None
+    try:
+        while len(kept) < n_episodes:
+            # Exactly as many attempts as demonstrations are missing: the kept seeds are then the
+            # first n successful ones, whatever the batching.
+            batch = list(range(next_seed, min(next_seed + n_episodes - len(kept), last_seed)))
+            if not batch:
+                raise RuntimeError(f"only {len(kept)} of {n_episodes} {task} demonstrations succeeded "
+                                   f"in {max_attempts} attempts (failed seeds {failed_seeds[:20]})")
+            next_seed += len(batch)
+            size = max(1, -(-len(batch) // (4 * workers)))  # ceil: about 4 chunks per worker, for the progress bar
+            chunks = [batch[i: i + size] for i in range(0, len(batch), size)]
+            args = ([task] * len(chunks), chunks, [cfg] * len(chunks))
+            for results in (pool.map(_run_seeds, *args) if pool else map(_run_seeds, *args)):
+                for s, episode in results:
+                    lenient += int(episode.pop("lenient_success"))
+                    if bool(episode.pop("strict_success")):
+                        kept.append(episode)
+                        kept_seeds.append(s)
+                        bar.update(1)
+                    else:
+                        failed_seeds.append(s)
+    finally:
+        if pool is not None:
+            pool.shutdown(cancel_futures=True)
+        bar.close()
+    attempts = next_seed - seed
     meta = {
         "env_id": ENV_IDS[task], "task": task, "obs_type": "state", "expert": "aloha_scripted (mocap waypoints, joint replay)",
-        "seed": seed, "n_episodes": n_episodes, "attempts": attempt, "episode_seeds": kept_seeds,
-        "failed_seeds": failed_seeds, "strict_successes": attempt - len(failed_seeds), "lenient_successes": lenient,
+        "seed": seed, "n_episodes": n_episodes, "attempts": attempts, "episode_seeds": kept_seeds,
+        "failed_seeds": failed_seeds, "strict_successes": len(kept), "lenient_successes": lenient,
         "state_names": list(STATE_NAMES), "control_hz": 50, "script_config": asdict(cfg),
     }
     return EpisodeDataset.from_episodes(kept, meta)
