@@ -7,7 +7,7 @@
 Action (14,) float: absolute joint targets for the position servos, in the layout of
 ``coursekit.envs.aloha.model`` ([left 6 joints, left gripper g, right 6 joints, right gripper g]).
 One step = 10 physics steps of 2 ms (50 Hz control). Joint targets outside the joint ranges and
-gripper commands outside [-0.34, 1.01] are CLIPPED to those bounds (the action space's low/high);
+gripper commands outside [-0.34, 1.0] are CLIPPED to those bounds (the action space's low/high);
 an action of the wrong shape or with NaN/inf raises ValueError.
 
 Observations (``obs_type``):
