@@ -14,7 +14,8 @@ Departures from the original script, each needed for a reliable strict success (
 310 and opens over 310-330 (the original opens at 220, before the left gripper has closed); grasps
 aim about 1 cm above the object centre so the pitched pads clear the table; the pick orientation
 is built in each arm's own frame (the right arm is yawed by pi); for insertion the grippers close
-harder and the right hand is raised to the socket's opening.
+harder (command 0.010 m) and, once both objects are lifted, the meeting poses are re-aimed at
+where the peg and socket really sit in the grippers (ACT hard-codes such an offset instead).
 
 Dataset arrays (per control step, episodes concatenated; see ``coursekit.data.EpisodeDataset``):
     "qpos" (N, 14), "qvel" (N, 14)   observation before the action (14-d layout)
