@@ -207,3 +207,37 @@ def test_rendering_does_not_change_the_dynamics():
         obs_p, *_ = pixel_env.step(action)
     np.testing.assert_array_equal(obs_s["qpos"], obs_p["qpos"])
     pixel_env.close()
+
+
+def _place(env, env_state):
+    """Put the objects at ``env_state`` (arms at their start pose) and update contacts/kinematics."""
+    env.reset(seed=0)
+    env.task.set_env_state(env.data, np.asarray(env_state, dtype=float))
+    mujoco.mj_forward(env.model, env.data)
+
+
+def test_strict_insertion_check_is_geometric():
+    env = AlohaInsertionEnv()
+    socket = np.array([-0.1, 0.5, 0.2, 1, 0, 0, 0])
+    yaw_pi = [0, 0, 0, 1]
+    cases = {  # peg pose relative to the socket -> inserted?
+        "tip at the pin": ([0.08, 0, 0], [1, 0, 0, 0], True),
+        "turned round, tip at the pin": ([0.08, 0, 0], yaw_pi, True),
+        "tip at the mouth only": ([0.12, 0, 0], [1, 0, 0, 0], False),
+        "beside the socket": ([0.08, 0.05, 0], [1, 0, 0, 0], False),
+        "far away": ([0.3, 0, 0], [1, 0, 0, 0], False),
+    }
+    for name, (offset, quat, expected) in cases.items():
+        peg = np.concatenate([socket[:3] + offset, quat])
+        _place(env, np.concatenate([peg, socket]))
+        assert env.strict_success() is expected, name
+    _place(env, env.task.spawn(np.random.default_rng(0)))
+    assert env.stage() == 0 and not env.strict_success()
+
+
+def test_strict_cube_check_needs_the_left_grip():
+    env = AlohaTransferCubeEnv()
+    _place(env, [0.1, 0.5, 0.02, 1, 0, 0, 0])  # resting on the table
+    assert not env.strict_success() and env.stage() == 0
+    _place(env, [0.1, 0.5, 0.2, 1, 0, 0, 0])  # in mid-air but held by nobody
+    assert not env.strict_success()
