@@ -131,6 +131,7 @@ class AlohaEnv(gymnasium.Env):
         return self._obs(), self._info(unstable=False)
 
     def step(self, action: np.ndarray) -> tuple[dict, float, bool, bool, dict]:
+        """One 50 Hz control step with a (14,) action (absolute joint targets + gripper commands)."""
         action = np.asarray(action, dtype=np.float64)
         if action.shape != (14,):
             raise ValueError(f"action must have shape (14,) [left 6 joints, left g, right 6 joints, right g], got {action.shape}")
