@@ -150,17 +150,33 @@ class PushTExpert:
         leaves the block untouched (slowing down up to twice); returns (targets, side, touched)."""
         cfg = self.config
         pose = state[2:5]
+        # A pusher still touching the T (it slid to a corner while pushing) first steps
+        # straight out to the travel clearance, and stops there before setting off.
+        start = state[:2]
+        exit_point = self.escape_point(state)
+        if exit_point is not None:
+            escape = speed_profile_targets(np.stack([start, exit_point]), cfg.turn_speed, cfg.travel_accel,
+                                           cfg.turn_speed)
+            start = exit_point
         fallback = None
         for side in sides:
-            route = self.routes.route(pose, world_to_local(state[:2], pose),
-                                      self.search.approach_local[push.contact], side)
+            try:
+                route = self.routes.route(pose, world_to_local(start, pose), self.search.approach_local[push.contact],
+                                          side)
+            except ValueError:  # that side closed off from the escape point
+                continue
             points = np.concatenate([route.points, push.standoff[None]])  # (K+1, 2)
             for slow in (1.0, 0.6, 0.35):
                 targets = speed_profile_targets(points, cfg.travel_speed * slow, cfg.travel_accel * slow,
                                                 cfg.turn_speed * slow)
+                if exit_point is not None:
+                    targets = np.concatenate([escape, targets])
                 if not self._bumps(state, targets):
                     return targets, side, False
                 fallback = (targets, side) if fallback is None else fallback
+        if fallback is None:  # no route at all (never seen): go straight and accept the touch
+            fallback = (speed_profile_targets(np.stack([state[:2], push.standoff]), cfg.turn_speed,
+                                              cfg.travel_accel, cfg.turn_speed), STRAIGHT)
         return fallback[0], fallback[1], True
 
     def _bumps(self, state: np.ndarray, targets: np.ndarray) -> bool:

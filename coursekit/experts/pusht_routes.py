@@ -118,7 +118,7 @@ class RoutePlanner:
     def lengths(self, pose, start_local: np.ndarray, goals_local: np.ndarray) -> np.ndarray:
         """Route lengths (3, M) to M goals (M, 2) from one start (2,), body frame, rows
         [straight, cw, ccw]; inf where that kind of route does not exist."""
-        goals = np.asarray(goals_local, dtype=np.float64).reshape(-1, 2)
+        goals = np.asarray(goals_local, dtype=np.float64).reshape(-1, 2)  # (M, 2)
         start = np.asarray(start_local, dtype=np.float64)
         out = np.full((3, len(goals)), np.inf)
         clear = self._visible(start, goals, np.minimum(point_distance(start), point_distance(goals)))
