@@ -43,3 +43,35 @@ def test_cli_exit_code(capsys):
     assert main(["check", "chunk_windows", "--dir", str(repo_root() / "exercises")]) == 1
     assert main(["check", "nope"]) == 2
     assert "unknown exercise" in capsys.readouterr().err
+
+
+def test_grade_cli_rejects_bad_input(tmp_path, capsys):
+    assert main(["grade", str(tmp_path / "nope"), "--out", str(tmp_path / "out")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    assert main(["grade", str(tmp_path), "--out", str(tmp_path / "out"), "--jobs", "0"]) == 2
+    assert "jobs must be at least 1, got 0" in capsys.readouterr().err
+    assert main(["grade", str(tmp_path), "--out", str(tmp_path / "out"), "--timeout", "-1"]) == 2
+    assert "timeouts must be positive" in capsys.readouterr().err
+    assert main(["grade", str(tmp_path), "--out", str(tmp_path / "out"), "--exercise", "nope"]) == 2
+    assert "unknown exercise 'nope'" in capsys.readouterr().err
+
+
+def test_zip_members_are_flattened_and_size_capped(tmp_path):
+    import zipfile
+
+    from coursekit.grading.grade import _extract_zip
+    from coursekit.grading.registry import EXERCISES
+    from coursekit.grading.runner import MAX_MODULE_BYTES
+
+    archive = tmp_path / "s.zip"
+    with zipfile.ZipFile(archive, "w") as zf:
+        zf.writestr("../../outside/chunk_windows.py", "X = 1\n")  # path traversal: only the basename counts
+        zf.writestr("deep/er/chunk_windows.py", "X = 2\n")  # shallower member wins, deeper ignored
+        zf.writestr("notes.txt", "hello")
+        zf.writestr(f"{EXERCISES[-1].id}.py", "#" * (MAX_MODULE_BYTES + 1))  # too big: not extracted
+    dest = tmp_path / "dest"
+    dest.mkdir()
+    _extract_zip(archive, dest, list(EXERCISES))
+    assert sorted(p.name for p in dest.iterdir()) == ["chunk_windows.py"]
+    assert (dest / "chunk_windows.py").read_text() == "X = 2\n"
+    assert not (tmp_path / "outside").exists()

@@ -6,7 +6,8 @@ the folder name or the zip's stem. For every student and exercise one sandboxed 
 the graded tests (:func:`coursekit.grading.runner.run_tests`); the test files are read once at
 the start, so nothing a submission does to files on disk changes how the others are graded.
 
-Written to ``--out`` (each file atomically, contents deterministic: no timestamps or timings)::
+Written to ``--out`` (each file atomically, as soon as it is complete; contents deterministic:
+no timestamps or timings)::
 
     grades.csv                 student x exercise points, total, max, notes
     <student>/results.json     Gradescope format: score, tests[name, number, score, max_score, status, output]
@@ -178,6 +179,8 @@ def grade_submissions(submissions: str | Path, out: str | Path, exercises: list[
             futures = [pool.submit(_grade_one, ex, folder, limits, sources) for _, ex, folder in tasks]
             for (sid, _, _), future in tqdm(zip(tasks, futures), total=len(tasks), desc="grading", disable=not progress):
                 students[sid].grades.append(future.result())
+                if len(students[sid].grades) == len(chosen):  # a finished student is saved at once
+                    write_student(out, students[sid])
 
     summary = GradeSummary(list(students.values()), chosen, out, time.monotonic() - start)
     after = _fingerprint(root, chosen)
@@ -185,7 +188,7 @@ def grade_submissions(submissions: str | Path, out: str | Path, exercises: list[
         if after.get(path) != digest:
             summary.warnings.append(f"{path} changed while grading (a submission wrote to it?): restore it "
                                     "from git; this run used the copy read at the start")
-    write_results(summary)
+    atomic_write_text(out / "grades.csv", class_csv(summary))
     return summary
 
 
@@ -273,10 +276,7 @@ def class_csv(summary: GradeSummary) -> str:
     return buffer.getvalue()
 
 
-def write_results(summary: GradeSummary) -> None:
-    """grades.csv, <student>/results.json and <student>/feedback.md, each written atomically."""
-    for student in summary.students:
-        folder = summary.out / student.student
-        atomic_write_text(folder / "results.json", json.dumps(gradescope_json(student), indent=2) + "\n")
-        atomic_write_text(folder / "feedback.md", feedback_markdown(student))
-    atomic_write_text(summary.out / "grades.csv", class_csv(summary))
+def write_student(out: Path, student: StudentGrade) -> None:
+    """<student>/results.json and <student>/feedback.md, each written atomically."""
+    atomic_write_text(out / student.student / "results.json", json.dumps(gradescope_json(student), indent=2) + "\n")
+    atomic_write_text(out / student.student / "feedback.md", feedback_markdown(student))
