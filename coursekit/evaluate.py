@@ -174,13 +174,18 @@ def _accepted_kwargs(fn: Callable[..., Any], kwargs: dict[str, Any]) -> dict[str
 
 
 def check_seeds_disjoint(seeds: Sequence[int], dataset_meta: dict[str, Any] | None) -> None:
-    """Refuse evaluation seeds that were demonstration seeds (meta: "seed", "n_episodes")."""
-    if not dataset_meta or "seed" not in dataset_meta or "n_episodes" not in dataset_meta:
+    """Refuse evaluation seeds that were demonstration seeds (meta "episode_seeds", or "seed" + "n_episodes")."""
+    if not dataset_meta:
         return
-    lo, hi = int(dataset_meta["seed"]), int(dataset_meta["seed"]) + int(dataset_meta["n_episodes"])
-    overlap = sorted(s for s in seeds if lo <= s < hi)
+    if "episode_seeds" in dataset_meta:  # the expert skips a failed seed and moves on: use the list
+        used = {int(s) for s in dataset_meta["episode_seeds"]}
+    elif "seed" in dataset_meta and "n_episodes" in dataset_meta:
+        used = set(range(int(dataset_meta["seed"]), int(dataset_meta["seed"]) + int(dataset_meta["n_episodes"])))
+    else:
+        return
+    overlap = sorted(int(s) for s in seeds if int(s) in used)
     if overlap:
-        raise ValueError(f"evaluation seeds {overlap[:5]}... were used for the demonstrations (seeds {lo}..{hi - 1}); "
+        raise ValueError(f"evaluation seeds {overlap[:5]}... were used for the demonstrations (seeds {min(used)}..{max(used)}); "
                          f"evaluate on held-out seeds (default: from {EVAL_SEED_START})")
 
 

@@ -90,6 +90,8 @@ def test_executor_class_is_plugged_in_explicitly():
 def test_heldout_seeds_are_disjoint_from_demonstrations():
     assert heldout_seeds(3) == [100000, 100001, 100002]
     check_seeds_disjoint(heldout_seeds(50), {"seed": 0, "n_episodes": 200})
+    with pytest.raises(ValueError, match="demonstrations"):  # a skipped seed moves the later ones on
+        check_seeds_disjoint([201], {"seed": 0, "n_episodes": 200, "episode_seeds": [*range(150), *range(151, 202)]})
     with pytest.raises(ValueError, match="demonstrations"):
         check_seeds_disjoint([5, 6], {"seed": 0, "n_episodes": 200})
     with pytest.raises(ValueError, match="demonstrations"):

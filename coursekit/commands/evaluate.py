@@ -19,16 +19,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--n-action-steps", type=int, default=None, help="override Ta, actions executed per chunk")
     parser.add_argument("--seed", type=int, default=0, help="seed of the sampler noise (default 0)")
     parser.add_argument("--device", default="auto", help="auto, cpu, cuda, mps (default auto)")
+    parser.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
     parser.add_argument("--json", type=Path, default=None, help="also write the summary to this JSON file")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
 def run(args: argparse.Namespace) -> int:
+    import torch
+
     from coursekit.checkpoint import load_checkpoint, read_checkpoint_info
     from coursekit.evaluate import EVAL_SEED_START, evaluate_pusht, heldout_seeds
     from coursekit.execution.receding import RecedingHorizon
     from coursekit.io import atomic_write_text
 
+    if args.threads is not None:
+        if args.threads < 1:
+            raise ValueError(f"--threads must be >= 1, got {args.threads}")
+        torch.set_num_threads(args.threads)
     info = read_checkpoint_info(args.checkpoint)
     policy = load_checkpoint(args.checkpoint, device=args.device)
     seeds = heldout_seeds(args.episodes, EVAL_SEED_START if args.seed_start is None else args.seed_start)

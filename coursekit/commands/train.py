@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 from pathlib import Path
 
@@ -18,12 +19,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--features", choices=["pusht_state", "pusht_keypoints", "pusht_image"], default="pusht_state",
                         help="observation features (default: pusht_state = agent xy, block xy, sin/cos angle)")
     parser.add_argument("--unet", default="cpu", help="U-Net size preset: cpu (default), paper_lowdim, paper_image")
+    parser.add_argument("--down-dims", default=None, help="override the preset's U-Net channels, e.g. 32,64,128")
     parser.add_argument("--n-action-steps", type=int, default=8, help="Ta, actions executed per chunk (default 8)")
     parser.add_argument("--batch-size", type=int, default=None, help="batch size (default 256 low-dim, 64 images)")
     parser.add_argument("--lr", type=float, default=1e-4, help="peak learning rate (default 1e-4)")
     parser.add_argument("--warmup-steps", type=int, default=500, help="linear LR warm-up steps (default 500)")
     parser.add_argument("--seed", type=int, default=0, help="seed of weights, batches and noise (default 0)")
-    parser.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
+    parser.add_argument("--threads", type=int, default=None,
+                        help="torch CPU threads (default: torch's choice; use 1 on a machine shared with other jobs)")
     parser.add_argument("--device", default="auto", help="auto, cpu, cuda, mps (default auto)")
     parser.add_argument("--checkpoint-every", type=float, default=5.0, help="minutes between periodic checkpoints (default 5)")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
@@ -41,9 +44,16 @@ def run(args: argparse.Namespace) -> int:
     config = TrainConfig(lr=args.lr, warmup_steps=args.warmup_steps, batch_size=batch_size, max_steps=args.steps,
                          minutes=args.minutes, seed=args.seed, num_threads=args.threads,
                          checkpoint_every_minutes=args.checkpoint_every, progress=not args.no_progress)
+    unet = UNet1DConfig.preset(args.unet)
+    if args.down_dims:
+        try:
+            dims = tuple(int(v) for v in args.down_dims.split(","))
+        except ValueError:
+            raise ValueError(f"--down-dims must be comma-separated ints like 32,64,128, got {args.down_dims!r}") from None
+        unet = dataclasses.replace(unet, down_dims=dims)
     dataset = EpisodeDataset.load(args.data)
     policy, batches = make_pusht_policy(args.policy, dataset, features=args.features, batch_size=batch_size,
-                                        seed=args.seed, device=args.device, unet=UNet1DConfig.preset(args.unet),
+                                        seed=args.seed, device=args.device, unet=unet,
                                         n_action_steps=args.n_action_steps)
     meta = {**dataset.meta, "path": str(args.data), "n_steps": dataset.n_steps, "n_episodes": dataset.n_episodes}
     print(f"{args.policy} policy, {policy.num_parameters() / 1e6:.2f} M parameters, {len(batches)} windows "

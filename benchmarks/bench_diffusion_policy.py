@@ -1,0 +1,137 @@
+"""Diffusion Policy on PushT: training throughput and the score after a fixed training budget.
+
+Run on a QUIET machine (the numbers are wall-clock): ``.venv/bin/python -m benchmarks.bench_diffusion_policy``
+(about 50 minutes: two 20-minute trainings plus evaluations). Parts:
+
+- ``throughput``: samples/s of the CPU-default DiffusionPolicy training step (batch 256, the
+  trainer as used by ``coursekit train``: batching, loss, AdamW, EMA), after a short warm-up.
+- ``score``: demonstrations from the PushT expert (200 episodes, seeds 0..199), DiffusionPolicy
+  trained for ``--minutes`` (default 20) on ``--threads`` (default 2) torch threads, evaluated
+  with DDIM-10 and DDPM-100 on 50 held-out seeds (100000..100049), 300 steps, mean of max reward;
+  the regression baseline (same backbone, data, budget) evaluated the same way.
+  ``--ship`` copies the trained checkpoints to ``coursekit/checkpoints/`` afterwards.
+
+Every figure goes through ``benchmarks.results.record(section="Diffusion Policy", ...)``.
+Sampler latency (DDIM-10 vs DDPM-100 per chunk) is measured by ``benchmarks.bench_samplers``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import time
+from pathlib import Path
+
+import torch
+
+from benchmarks.results import record
+from coursekit.checkpoint import load_checkpoint
+from coursekit.data.episodes import EpisodeDataset
+from coursekit.evaluate import evaluate_pusht
+from coursekit.policies.factory import make_pusht_policy
+from coursekit.train import TrainConfig, train
+
+COMMAND = ".venv/bin/python -m benchmarks.bench_diffusion_policy"
+SECTION = "Diffusion Policy"
+ROOT = Path(__file__).resolve().parent.parent
+SHIP = {"diffusion": ROOT / "coursekit" / "checkpoints" / "pusht_diffusion_state",
+        "regression": ROOT / "coursekit" / "checkpoints" / "pusht_regression_state"}
+
+
+def load_or_collect(path: Path, n_episodes: int, seed: int) -> EpisodeDataset:
+    """The demonstrations file, collected with the PushT expert if it does not exist yet."""
+    if path.is_file():
+        return EpisodeDataset.load(path)
+    from coursekit.experts.pusht_planner import collect_dataset
+
+    dataset = collect_dataset(n_episodes, seed)
+    dataset.save(path)
+    return dataset
+
+
+def throughput(dataset: EpisodeDataset, threads: int, seconds: float) -> float:
+    """Samples/s of full trainer steps (CPU default config, batch 256) after 5 warm-up steps."""
+    policy, batches = make_pusht_policy("diffusion", dataset, device="cpu")
+    train(policy, batches, TrainConfig(max_steps=5, num_threads=threads, progress=False))  # warm-up
+    result = train(policy, batches, TrainConfig(minutes=seconds / 60, num_threads=threads, progress=False,
+                                                checkpoint_every_minutes=None))
+    return float(result.summary["samples_per_s"])
+
+
+def train_policy(kind: str, dataset: EpisodeDataset, args: argparse.Namespace, out: Path) -> dict:
+    """Train ``kind`` for the budget into ``out`` (unless it exists and --reuse); returns the training summary."""
+    if args.reuse and (out / "config.json").is_file():
+        return json.loads((out / "config.json").read_text())["training"]
+    policy, batches = make_pusht_policy(kind, dataset, seed=args.seed, device="cpu")
+    meta = {**dataset.meta, "n_steps": dataset.n_steps}
+    meta.pop("route_choices", None)  # bulky; the dataset file keeps it
+    cfg = TrainConfig(minutes=args.minutes, num_threads=args.threads, seed=args.seed, lr=args.lr)
+    return train(policy, batches, cfg, out_dir=out, dataset_meta=meta).summary
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--only", choices=["throughput", "score"], default=None, help="run one part")
+    parser.add_argument("--minutes", type=float, default=20.0, help="training budget per policy (default 20)")
+    parser.add_argument("--threads", type=int, default=2, help="torch threads for training and evaluation (default 2)")
+    parser.add_argument("--episodes", type=int, default=50, help="evaluation episodes (default 50)")
+    parser.add_argument("--demos", type=int, default=200, help="demonstrations (default 200, seeds 0..199)")
+    parser.add_argument("--lr", type=float, default=1e-4, help="peak learning rate (default 1e-4, the paper's)")
+    parser.add_argument("--seed", type=int, default=0, help="training seed (default 0)")
+    parser.add_argument("--out", type=Path, default=ROOT / "outputs" / "bench_dp", help="work directory")
+    parser.add_argument("--reuse", action="store_true", help="reuse checkpoints already in --out (evaluate only)")
+    parser.add_argument("--ship", action="store_true", help="copy the trained checkpoints to coursekit/checkpoints/")
+    parser.add_argument("--no-record", action="store_true", help="print only, do not write results.json")
+    args = parser.parse_args(argv)
+    args.out.mkdir(parents=True, exist_ok=True)
+    torch.set_num_threads(args.threads)
+    load = os.getloadavg()[0]
+    dataset = load_or_collect(args.out / f"pusht_{args.demos}ep_seed0.npz", args.demos, 0)
+    rec = (lambda *a, **k: None) if args.no_record else record  # noqa: E731
+    machine = f"{args.threads} torch threads, load average {load:.1f} at start"
+
+    if args.only in (None, "throughput"):
+        sps = throughput(dataset, args.threads, seconds=60.0)
+        print(f"training throughput: {sps:.0f} samples/s")
+        rec(SECTION, "training throughput (CPU default, batch 256)", round(sps), "samples/s", f"{COMMAND} --only throughput",
+            note=f"U-Net 64/128/256 (4.5 M params), full trainer step incl. EMA; 60 s after warm-up; {machine}")
+    if args.only == "throughput":
+        return
+
+    scores = {}
+    for kind in ("diffusion", "regression"):
+        out = args.out / f"{kind}_{args.minutes:g}min"
+        summary = train_policy(kind, dataset, args, out)
+        policy = load_checkpoint(out, device="cpu")
+        samplers = [("ddim", 10), ("ddpm", 100)] if kind == "diffusion" else [(None, None)]
+        for sampler, steps in samplers:
+            t0 = time.perf_counter()
+            r = evaluate_pusht(policy, n_episodes=args.episodes, sampler=sampler, num_inference_steps=steps,
+                               dataset_meta=json.loads((out / "config.json").read_text())["dataset"])
+            label = f"{kind} {sampler.upper()}-{steps}" if sampler else kind
+            scores[label] = r
+            print(f"{label}: score {r.score:.3f} +- {r.summary()['score_stderr']:.3f}, success {r.success_rate:.0%}, "
+                  f"{summary['steps']} steps in {summary['seconds']:.0f} s, eval {time.perf_counter() - t0:.0f} s")
+        if args.ship:
+            shutil.copytree(out, SHIP[kind], dirs_exist_ok=True)
+
+    dp, dp_ddpm, reg = scores["diffusion DDIM-10"], scores["diffusion DDPM-100"], scores["regression"]
+    note = (f"{args.demos} expert demos, {args.minutes:g} min training, {args.episodes} held-out seeds from 100000, "
+            f"300 steps, {machine}")
+    cmd = f"{COMMAND} --only score"
+    rec(SECTION, f"score after {args.minutes:g} min, DDIM-10", round(dp.score, 3), "", cmd, target=">= 0.80",
+        note=f"success {dp.success_rate:.0%}; stderr {dp.summary()['score_stderr']:.3f}; {note}")
+    rec(SECTION, f"score after {args.minutes:g} min, DDPM-100", round(dp_ddpm.score, 3), "", cmd,
+        note=f"success {dp_ddpm.success_rate:.0%}; {note}")
+    rec(SECTION, "DDIM-10 vs DDPM-100 score difference", round(abs(dp.score - dp_ddpm.score), 3), "", cmd,
+        target="<= 0.05", note=note)
+    rec(SECTION, f"regression baseline score after {args.minutes:g} min", round(reg.score, 3), "", cmd,
+        note=f"success {reg.success_rate:.0%}; same backbone and data; {note}")
+    rec(SECTION, "Diffusion Policy (DDIM-10) minus regression baseline", round(dp.score - reg.score, 3), "", cmd,
+        target=">= 0.15", note=note)
+
+
+if __name__ == "__main__":
+    main()
