@@ -192,7 +192,7 @@ def grade_submissions(submissions: str | Path, out: str | Path, exercises: list[
     return summary
 
 
-def _test_output(ex_grade: ExerciseGrade, score: TestScore) -> str:
+def _test_output(score: TestScore) -> str:
     if score.passed:
         return "passed"
     parts = [f"hint: {score.hint}"]
@@ -217,7 +217,7 @@ def gradescope_json(student: StudentGrade) -> dict:
                 "score": s.points,
                 "max_score": s.max_points,
                 "status": "passed" if s.passed else "failed",
-                "output": _test_output(g, s),
+                "output": _test_output(s),
                 "visibility": "visible",
             })
     notes = [f"{g.exercise.id}: {g.reason}" for g in student.grades if g.reason]

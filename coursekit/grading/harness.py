@@ -70,8 +70,10 @@ class _FunctionParts:
         return getattr(self._function, key)
 
 
-def _snapshot(namespaces: dict[str, dict]) -> dict[str, dict[str, int]]:
-    return {name: {k: id(v) for k, v in ns.items()} for name, ns in namespaces.items()}
+def _snapshot(namespaces: dict[str, dict]) -> dict[str, dict[str, object]]:
+    """The objects themselves, not their ids: holding them keeps a replaced object's address
+    from being reused by its replacement (which would hide the swap)."""
+    return {name: dict(ns.items()) for name, ns in namespaces.items()}
 
 
 class ReportPlugin:
@@ -81,7 +83,7 @@ class ReportPlugin:
         self.channel = channel
         self.phases: dict[str, dict[str, Any]] = {}
         self.namespaces: dict[str, dict] = {}
-        self.snapshot: dict[str, dict[str, int]] = {}
+        self.snapshot: dict[str, dict[str, object]] = {}
         self.tampered = ""
         self.names: dict[str, str] = {}
         self.errors: dict[tuple[str, str], str] = {}
@@ -120,10 +122,10 @@ class ReportPlugin:
     def _check_tripwire(self) -> str:
         if self.tampered:
             return self.tampered
-        for name, ids in self.snapshot.items():
+        for name, objects in self.snapshot.items():
             ns = self.namespaces[name]
-            for key, ident in ids.items():
-                if key not in ns or id(ns[key]) != ident:
+            for key, value in objects.items():
+                if key not in ns or ns[key] is not value:
                     self.tampered = f"{name}: {key!r} was replaced or deleted while the tests ran"
                     return self.tampered
         return ""
