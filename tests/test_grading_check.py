@@ -75,3 +75,23 @@ def test_zip_members_are_flattened_and_size_capped(tmp_path):
     assert sorted(p.name for p in dest.iterdir()) == ["chunk_windows.py"]
     assert (dest / "chunk_windows.py").read_text() == "X = 2\n"
     assert not (tmp_path / "outside").exists()
+
+
+def test_partial_credit_for_parametrized_tests_and_zero_when_tampered():
+    from coursekit.grading.runner import Outcome, RunResult, score_exercise
+
+    exercise = get_exercise("chunk_windows")
+    file = "test_chunk_windows.py"
+    outcomes = [Outcome(f"{file}::{name}", "passed") for name in exercise.tests
+                if name != "test_matches_library_on_random_datasets"]
+    outcomes += [Outcome(f"{file}::test_matches_library_on_random_datasets[{i}]", o, "boom" if o == "failed" else "")
+                 for i, o in enumerate(["passed", "failed", "passed", "not run"])]
+    scores = {s.name: s for s in score_exercise(exercise, RunResult(outcomes=outcomes))}
+    random = scores["test_matches_library_on_random_datasets"]
+    assert random.points == exercise.tests[random.name][0] * 2 / 4 and not random.passed
+    assert random.message == "2/4 cases failed; first: boom"
+    assert sum(s.points for s in scores.values()) == exercise.max_points - exercise.tests[random.name][0] / 2
+    tampered = score_exercise(exercise, RunResult(outcomes=outcomes, status="tampered", reason="tampering detected"))
+    assert all(s.points == 0 and not s.passed and s.message == "tampering detected" for s in tampered)
+    missing = score_exercise(exercise, RunResult(status="missing", reason="chunk_windows.py was not found"))
+    assert all(s.points == 0 and "not found" in s.message for s in missing)
