@@ -1,7 +1,7 @@
 """The child side of a grading run: pytest on the graded tests, results over a private pipe.
 
-Started by :mod:`coursekit.grading.runner` as ``python -I -m coursekit.grading.harness`` in a
-scratch folder. The parent writes one JSON line on stdin with the settings and a random nonce;
+Started by :mod:`coursekit.grading.runner` as ``python -I`` running :func:`main` in a scratch
+folder. The parent writes one JSON line on stdin with the settings and a random nonce;
 this process then applies its resource limits, closes stdin and runs pytest. Each test's
 outcome is written as a JSON line carrying the nonce to a pipe file descriptor that only the
 parent reads. Text the student's code prints goes to pytest's capture or to a log file that

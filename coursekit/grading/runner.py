@@ -35,6 +35,12 @@ MAX_PIPE_BYTES = 8 * 1024 * 1024
 """The parent stops storing result messages beyond this many bytes."""
 
 
+# The child imports the very coursekit this process runs (an editable install, a clone on
+# PYTHONPATH, ...): `python -I` ignores PYTHONPATH and the current folder, so the path is explicit.
+_PACKAGE_ROOT = Path(__file__).resolve().parents[2]
+_CHILD_CODE = "import sys; sys.path.insert(0, {root!r}); from coursekit.grading.harness import main; sys.exit(main())"
+
+
 @dataclass(frozen=True)
 class Limits:
     """Resource limits of one grading subprocess."""
@@ -248,7 +254,7 @@ def _attempt(exercises: list[Exercise], submission: Path, limits: Limits, source
         }
         with open(scratch / "harness.log", "wb") as log:
             proc = subprocess.Popen(
-                [sys.executable, "-I", "-m", "coursekit.grading.harness"],
+                [sys.executable, "-I", "-c", _CHILD_CODE.format(root=str(_PACKAGE_ROOT))],
                 stdin=subprocess.PIPE, stdout=log, stderr=subprocess.STDOUT, cwd=scratch / "work",
                 env=_child_env(scratch, student_dir), pass_fds=(write_fd,), close_fds=True,
                 start_new_session=True,
