@@ -1,15 +1,21 @@
 """Diffusion Policy on PushT: training throughput and the score after a fixed training budget.
 
 Run on a QUIET machine (the numbers are wall-clock): ``.venv/bin/python -m benchmarks.bench_diffusion_policy``
-(about 50 minutes: two 20-minute trainings plus evaluations). Parts:
+(about 47 minutes: two 20-minute trainings, evaluations, 1 minute of throughput). Parts:
 
 - ``throughput``: samples/s of the CPU-default DiffusionPolicy training step (batch 256, the
   trainer as used by ``coursekit train``: batching, loss, AdamW, EMA), after a short warm-up.
 - ``score``: demonstrations from the PushT expert (200 episodes, seeds 0..199), DiffusionPolicy
   trained for ``--minutes`` (default 20) on ``--threads`` (default 2) torch threads, evaluated
   with DDIM-10 and DDPM-100 on 50 held-out seeds (100000..100049), 300 steps, mean of max reward;
-  the regression baseline (same backbone, data, budget) evaluated the same way.
+  the regression baseline (same backbone, data and trainer; ``--regression-minutes``) evaluated
+  the same way. ``--policies diffusion`` skips the baseline; ``--reuse`` only re-evaluates.
   ``--ship`` copies the trained checkpoints to ``coursekit/checkpoints/`` afterwards.
+- Variants for the score/time trade-off: ``--down-dims 48,96,192``, ``--batch-size 128``, ``--lr 3e-4``.
+
+With ``--threads 2`` on a machine shared with other jobs, torch's two OpenMP threads wait for
+each other at every op and training slows down by one to two orders of magnitude: measure on an
+otherwise idle machine (the load average at the start is recorded in each note).
 
 Every figure goes through ``benchmarks.results.record(section="Diffusion Policy", ...)``.
 Sampler latency (DDIM-10 vs DDPM-100 per chunk) is measured by ``benchmarks.bench_samplers``.
@@ -30,6 +36,7 @@ from benchmarks.results import record
 from coursekit.checkpoint import load_checkpoint
 from coursekit.data.episodes import EpisodeDataset
 from coursekit.evaluate import evaluate_pusht
+from coursekit.nn.unet1d import UNet1DConfig
 from coursekit.policies.factory import make_pusht_policy
 from coursekit.train import TrainConfig, train
 
@@ -64,10 +71,12 @@ def train_policy(kind: str, dataset: EpisodeDataset, args: argparse.Namespace, o
     """Train ``kind`` for the budget into ``out`` (unless it exists and --reuse); returns the training summary."""
     if args.reuse and (out / "config.json").is_file():
         return json.loads((out / "config.json").read_text())["training"]
-    policy, batches = make_pusht_policy(kind, dataset, seed=args.seed, device="cpu")
+    unet = UNet1DConfig(down_dims=tuple(int(v) for v in args.down_dims.split(",")))
+    policy, batches = make_pusht_policy(kind, dataset, seed=args.seed, device="cpu", batch_size=args.batch_size, unet=unet)
     meta = {**dataset.meta, "n_steps": dataset.n_steps}
     meta.pop("route_choices", None)  # bulky; the dataset file keeps it
-    cfg = TrainConfig(minutes=args.minutes, num_threads=args.threads, seed=args.seed, lr=args.lr)
+    minutes = args.minutes if kind == "diffusion" or args.regression_minutes is None else args.regression_minutes
+    cfg = TrainConfig(minutes=minutes, num_threads=args.threads, seed=args.seed, lr=args.lr, batch_size=args.batch_size)
     return train(policy, batches, cfg, out_dir=out, dataset_meta=meta).summary
 
 
@@ -78,7 +87,12 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--threads", type=int, default=2, help="torch threads for training and evaluation (default 2)")
     parser.add_argument("--episodes", type=int, default=50, help="evaluation episodes (default 50)")
     parser.add_argument("--demos", type=int, default=200, help="demonstrations (default 200, seeds 0..199)")
+    parser.add_argument("--regression-minutes", type=float, default=None,
+                        help="training budget of the regression baseline (default: --minutes)")
+    parser.add_argument("--policies", default="diffusion,regression", help="which to train/evaluate (default both)")
     parser.add_argument("--lr", type=float, default=1e-4, help="peak learning rate (default 1e-4, the paper's)")
+    parser.add_argument("--batch-size", type=int, default=256, help="batch size (default 256, the paper's)")
+    parser.add_argument("--down-dims", default="64,128,256", help="U-Net channels (default 64,128,256 = CPU default)")
     parser.add_argument("--seed", type=int, default=0, help="training seed (default 0)")
     parser.add_argument("--out", type=Path, default=ROOT / "outputs" / "bench_dp", help="work directory")
     parser.add_argument("--reuse", action="store_true", help="reuse checkpoints already in --out (evaluate only)")
@@ -100,9 +114,14 @@ def main(argv: list[str] | None = None) -> None:
     if args.only == "throughput":
         return
 
+    kinds = [k.strip() for k in args.policies.split(",") if k.strip()]
+    if not set(kinds) <= {"diffusion", "regression"}:
+        raise ValueError(f"--policies must name diffusion and/or regression, got {args.policies!r}")
+    budget = sum(args.minutes if k == "diffusion" else (args.regression_minutes or args.minutes) for k in kinds)
+    print(f"training {kinds} for {budget:g} min in all, plus evaluation (DDPM-100 on {args.episodes} episodes: ~3 min)")
     scores = {}
-    for kind in ("diffusion", "regression"):
-        out = args.out / f"{kind}_{args.minutes:g}min"
+    for kind in kinds:
+        out = args.out / f"{kind}_{args.minutes:g}min_{args.down_dims.replace(',', '-')}_b{args.batch_size}_lr{args.lr:g}"
         summary = train_policy(kind, dataset, args, out)
         policy = load_checkpoint(out, device="cpu")
         samplers = [("ddim", 10), ("ddpm", 100)] if kind == "diffusion" else [(None, None)]
@@ -117,20 +136,25 @@ def main(argv: list[str] | None = None) -> None:
         if args.ship:
             shutil.copytree(out, SHIP[kind], dirs_exist_ok=True)
 
-    dp, dp_ddpm, reg = scores["diffusion DDIM-10"], scores["diffusion DDPM-100"], scores["regression"]
-    note = (f"{args.demos} expert demos, {args.minutes:g} min training, {args.episodes} held-out seeds from 100000, "
-            f"300 steps, {machine}")
+    note = (f"{args.demos} expert demos, {args.minutes:g} min training ({args.down_dims}, batch {args.batch_size}, "
+            f"lr {args.lr:g}), {args.episodes} held-out seeds from 100000, 300 steps, {machine}")
     cmd = f"{COMMAND} --only score"
-    rec(SECTION, f"score after {args.minutes:g} min, DDIM-10", round(dp.score, 3), "", cmd, target=">= 0.80",
-        note=f"success {dp.success_rate:.0%}; stderr {dp.summary()['score_stderr']:.3f}; {note}")
-    rec(SECTION, f"score after {args.minutes:g} min, DDPM-100", round(dp_ddpm.score, 3), "", cmd,
-        note=f"success {dp_ddpm.success_rate:.0%}; {note}")
-    rec(SECTION, "DDIM-10 vs DDPM-100 score difference", round(abs(dp.score - dp_ddpm.score), 3), "", cmd,
-        target="<= 0.05", note=note)
-    rec(SECTION, f"regression baseline score after {args.minutes:g} min", round(reg.score, 3), "", cmd,
-        note=f"success {reg.success_rate:.0%}; same backbone and data; {note}")
-    rec(SECTION, "Diffusion Policy (DDIM-10) minus regression baseline", round(dp.score - reg.score, 3), "", cmd,
-        target=">= 0.15", note=note)
+    if "diffusion" in kinds:
+        dp, dp_ddpm = scores["diffusion DDIM-10"], scores["diffusion DDPM-100"]
+        rec(SECTION, f"score after {args.minutes:g} min, DDIM-10", round(dp.score, 3), "", cmd, target=">= 0.80",
+            note=f"success {dp.success_rate:.0%}; stderr {dp.summary()['score_stderr']:.3f}; {note}")
+        rec(SECTION, f"score after {args.minutes:g} min, DDPM-100", round(dp_ddpm.score, 3), "", cmd,
+            note=f"success {dp_ddpm.success_rate:.0%}; {note}")
+        rec(SECTION, "DDIM-10 vs DDPM-100 score difference", round(abs(dp.score - dp_ddpm.score), 3), "", cmd,
+            target="<= 0.05", note=note)
+    if "regression" in kinds:
+        reg = scores["regression"]
+        reg_min = args.regression_minutes or args.minutes
+        rec(SECTION, f"regression baseline score after {reg_min:g} min", round(reg.score, 3), "", cmd,
+            note=f"success {reg.success_rate:.0%}; same backbone and data; {note}")
+        if "diffusion" in kinds:
+            rec(SECTION, "Diffusion Policy (DDIM-10) minus regression baseline", round(scores["diffusion DDIM-10"].score - reg.score, 3),
+                "", cmd, target=">= 0.15", note=f"regression trained {reg_min:g} min; {note}")
 
 
 if __name__ == "__main__":
