@@ -14,6 +14,7 @@ wall time of ``collect_dataset(200, seed=0)``.
 from __future__ import annotations
 
 import argparse
+import os
 import time
 
 import numpy as np
@@ -52,12 +53,13 @@ def measure(n_seeds: int) -> dict[str, float]:
     }
 
 
-def time_collect(n_episodes: int) -> float:
+def time_collect(n_episodes: int) -> tuple[float, float, dict]:
+    """(wall seconds, CPU seconds of this process, dataset meta) of collect_dataset(n, seed=0)."""
     from coursekit.experts.pusht_planner import collect_dataset
 
-    start = time.perf_counter()
-    collect_dataset(n_episodes, seed=0, progress=False)
-    return time.perf_counter() - start
+    start, cpu = time.perf_counter(), time.process_time()
+    dataset = collect_dataset(n_episodes, seed=0, progress=False)
+    return time.perf_counter() - start, time.process_time() - cpu, dataset.meta
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -68,12 +70,16 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     cmd = "python -m benchmarks.bench_pusht_expert"
     r = measure(args.seeds)
-    seconds = time_collect(args.collect) if args.collect else float("nan")
+    seconds, cpu, meta = time_collect(args.collect) if args.collect else (float("nan"), float("nan"), {})
+    load = os.getloadavg()[0]
+    firsts = [ep[0]["taken"] for ep in meta.get("route_choices", []) if ep]
     print(f"success {r['success']:.1%} | steps mean {r['mean_steps']:.1f} p90 {r['p90_steps']:.0f} "
           f"max {r['max_steps']:.0f} | two-way choice {r['choice_fraction']:.0%} of episodes, "
           f"clockwise {r['cw_share']:.0%} of {r['n_choices']:.0f} | travel bumps {r['travel_bumps']:.0f}, "
           f"block moved during travel {r['max_travel_block_move']:.2g} | largest target step "
-          f"{r['max_target_jump']:.1f} px | collect {args.collect}: {seconds:.1f} s")
+          f"{r['max_target_jump']:.1f} px | collect {args.collect}: {seconds:.1f} s wall, {cpu:.1f} s CPU "
+          f"(load average {load:.1f}); dataset: two-way choice in {len(firsts)} episodes, "
+          f"clockwise {firsts.count('cw')}")
     if args.no_record:
         return 0
     from benchmarks.results import record
@@ -93,7 +99,11 @@ def main(argv: list[str] | None = None) -> int:
            note=f"largest block move during travel {r['max_travel_block_move']:.2g} px (settling out of a wall)")
     if args.collect:
         record(SECTION, f"collect {args.collect} demonstrations", seconds, "s", cmd, target="< 60 s on 2 cores",
-               note="collect_dataset(200, seed=0), state observations, one process")
+               note=f"collect_dataset({args.collect}, seed=0), state observations, one process: {cpu:.1f} s CPU, "
+                    f"load average {load:.1f} while measured")
+        record(SECTION, f"two-way choices in the {args.collect}-episode dataset", len(firsts) / args.collect * 100,
+               "%", cmd, target=">= 30 %, split 40/60..60/40",
+               note=f"clockwise {firsts.count('cw')} of {len(firsts)}")
     return 0
 
 

@@ -147,33 +147,37 @@ class PushTExpert:
 
     def plan_travel(self, state: np.ndarray, push: Push, sides: list[str]) -> tuple[np.ndarray, str, bool]:
         """Targets (T, 2) from the pusher to ``push.standoff`` along the first side whose replay
-        leaves the block untouched (slowing down up to twice); returns (targets, side, touched)."""
+        leaves the block untouched, slowing down up to twice; returns (targets, side, touched).
+
+        Right after a push the lagging pusher is often still within a pixel of the T; routes may
+        leave along that gap. Only if every such try touches the block does the pusher first
+        step straight out to the travel clearance, stop, and then set off.
+        """
         cfg = self.config
         pose = state[2:5]
-        # A pusher still touching the T (it slid to a corner while pushing) first steps
-        # straight out to the travel clearance, and stops there before setting off.
-        start = state[:2]
-        exit_point = self.escape_point(state)
-        if exit_point is not None:
-            escape = speed_profile_targets(np.stack([start, exit_point]), cfg.turn_speed, cfg.travel_accel,
-                                           cfg.turn_speed)
-            start = exit_point
         fallback = None
-        for side in sides:
-            try:
-                route = self.routes.route(pose, world_to_local(start, pose), self.search.approach_local[push.contact],
-                                          side)
-            except ValueError:  # that side closed off from the escape point
-                continue
-            points = np.concatenate([route.points, push.standoff[None]])  # (K+1, 2)
-            for slow in (1.0, 0.6, 0.35):
-                targets = speed_profile_targets(points, cfg.travel_speed * slow, cfg.travel_accel * slow,
-                                                cfg.turn_speed * slow)
-                if exit_point is not None:
-                    targets = np.concatenate([escape, targets])
-                if not self._bumps(state, targets):
-                    return targets, side, False
-                fallback = (targets, side) if fallback is None else fallback
+        for escape in (False, True):
+            start, prefix = state[:2], np.empty((0, 2))
+            if escape:
+                exit_point = self.escape_point(state)
+                if exit_point is None:
+                    break
+                prefix = speed_profile_targets(np.stack([start, exit_point]), cfg.turn_speed, cfg.travel_accel,
+                                               cfg.turn_speed)
+                start = exit_point
+            for side in sides:
+                try:
+                    route = self.routes.route(pose, world_to_local(start, pose),
+                                              self.search.approach_local[push.contact], side)
+                except ValueError:  # that side is closed off from this start
+                    continue
+                points = np.concatenate([route.points, push.standoff[None]])  # (K+1, 2)
+                for slow in (1.0, 0.6, 0.35):
+                    targets = np.concatenate([prefix, speed_profile_targets(
+                        points, cfg.travel_speed * slow, cfg.travel_accel * slow, cfg.turn_speed * slow)])
+                    if not self._bumps(state, targets):
+                        return targets, side, False
+                    fallback = (targets, side) if fallback is None else fallback
         if fallback is None:  # no route at all (never seen): go straight and accept the touch
             fallback = (speed_profile_targets(np.stack([state[:2], push.standoff]), cfg.turn_speed,
                                               cfg.travel_accel, cfg.turn_speed), STRAIGHT)
