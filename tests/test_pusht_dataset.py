@@ -40,7 +40,8 @@ def test_arrays_and_meta(dataset):
         obs, _ = PushTEnv().reset(seed=meta["episode_seeds"][e])
         np.testing.assert_allclose(ep["state"][0, :4], obs[:4])
         assert ep["coverage"][-1] > geo.SUCCESS_THRESHOLD
-        assert len(ep["state"]) == meta["success_steps"][e] + meta["rest_steps"]
+        assert len(ep["state"]) == meta["finish_steps"][e] + meta["rest_steps"]
+        assert meta["success_steps"][e] <= meta["finish_steps"][e]
 
 
 def test_angle_is_unwrapped_and_coverage_matches_state(dataset):

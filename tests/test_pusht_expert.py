@@ -160,7 +160,8 @@ def _check_episode(rec, cfg: ExpertConfig) -> None:
     from coursekit.experts.pusht_planner import REST, TRAVEL
 
     assert rec.success_step is not None and rec.success_step <= 300
-    assert len(rec.states) == rec.success_step + cfg.rest_steps
+    assert rec.finish_step >= rec.success_step
+    assert len(rec.states) == rec.finish_step + cfg.rest_steps
     # Smooth 10 Hz targets: no target far from the previous one, nor from the pusher at the start.
     jumps = np.linalg.norm(np.diff(rec.actions, axis=0), axis=1)
     assert jumps.max() <= cfg.travel_speed + 1e-6
@@ -171,11 +172,14 @@ def _check_episode(rec, cfg: ExpertConfig) -> None:
     moved = np.abs(rec.states[travel + 1, 2:5] - rec.states[travel, 2:5])
     assert moved.max(initial=0.0) < 0.05
     assert rec.travel_bumps == 0
-    # Rest at the end: targets on the pusher's own position, coverage still above 0.95.
+    # Rest at the end: targets on the pusher's own position, the pusher coming to a stop, the
+    # coverage staying above 0.95 throughout and above final_coverage at the end.
     rest = rec.phases == REST
     assert rest.sum() == cfg.rest_steps and rest[-cfg.rest_steps:].all()
     np.testing.assert_allclose(rec.actions[rest], rec.states[rest, :2])
-    assert (rec.coverage[rest][1:] > geo.SUCCESS_THRESHOLD).all()
+    assert np.linalg.norm(rec.states[-1, :2] - rec.states[-2, :2]) < 0.5
+    assert (rec.coverage[rest] > geo.SUCCESS_THRESHOLD).all()
+    assert rec.coverage[-1] > cfg.final_coverage - 0.005  # the rest check ran on a copied state
 
 
 @pytest.mark.parametrize("seed", [0, 7, 50, 65, 158])  # 50: pusher starts inside the T; 65: T in a

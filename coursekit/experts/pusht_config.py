@@ -40,6 +40,9 @@ class ExpertConfig:
     shorter one count as a real two-way choice: a seeded coin picks the side."""
     rest_steps: int = 5
     """Steps at rest (target = pusher position) recorded after success."""
+    final_coverage: float = 0.96
+    """Coverage the T must still have after the rest steps for a push to count as the last one
+    (at least the success threshold 0.95; higher ends demonstrations deeper inside success)."""
     max_settle_steps: int = 20
     """At most this many steps waiting for an overlapping reset to settle."""
 
@@ -62,6 +65,8 @@ class ExpertConfig:
             raise ValueError(f"turn_speed {self.turn_speed!r} exceeds travel_speed {self.travel_speed!r}")
         if not self.push_depths or min(self.push_depths) <= 0:
             raise ValueError(f"push_depths must be a non-empty tuple of positive depths, got {self.push_depths!r}")
+        if not 0.95 <= self.final_coverage < 1.0:
+            raise ValueError(f"final_coverage must be in [0.95, 1), got {self.final_coverage!r}")
         if self.route_tolerance < 0:
             raise ValueError(f"route_tolerance must be >= 0, got {self.route_tolerance!r}")
         self.push_depths = tuple(float(d) for d in self.push_depths)

@@ -66,7 +66,11 @@ class EpisodeRecord:
     actions: (T, 2) pusher targets.
     coverage: (T,) coverage of the row's state.
     phases: (T,) int8 SETTLE / TRAVEL / PUSH / REST.
-    success_step: number of actions after which coverage first passed 0.95 (None: failed).
+    success_step: number of actions after which coverage first passed 0.95 (None: failed);
+        the env's ``terminated``, and what success rates and step counts measure.
+    finish_step: number of actions after which the expert stopped pushing (coverage above 0.95
+        and staying above ``final_coverage`` at rest); usually ``success_step``, later when the
+        first crossing was only in passing. The rest steps follow it.
     route_choices: one dict per coin toss {"step", "side", "taken", "lengths": [cw, ccw]}.
     travel_bumps: travel legs that still touched the block after slowing down (expected 0).
     """
@@ -76,6 +80,7 @@ class EpisodeRecord:
     coverage: np.ndarray
     phases: np.ndarray
     success_step: int | None
+    finish_step: int | None
     route_choices: list[dict] = field(default_factory=list)
     travel_bumps: int = 0
 
@@ -207,7 +212,7 @@ class PushTExpert:
         options = None if reset_state is None else {"reset_to_state": np.asarray(reset_state, dtype=np.float64)}
         _, info = env.reset(seed=seed, options=options)
         coin = Coin(coin_seed if coin_seed is not None else (seed if seed is not None else 0))
-        ep = _Recorder(env, info["coverage"], cfg.max_steps)
+        ep = _Recorder(env, info["coverage"], cfg.max_steps, search.rests_successfully)
         self._settle(env, ep)
         choices: list[dict] = []
         bumps = 0
@@ -247,7 +252,7 @@ class PushTExpert:
                 continue
             ep.follow(push.push_in, PUSH)
             pushed = push
-        if ep.success_step is not None:
+        if ep.success_step is not None:  # 5. rest
             for _ in range(cfg.rest_steps):
                 ep.step(env.get_state()[:2], REST, force=True)
         return ep.record(choices, bumps)
@@ -269,13 +274,18 @@ class PushTExpert:
 
 
 class _Recorder:
-    """Steps the real env and records (state before the action, action, coverage, phase)."""
+    """Steps the real env and records (state before the action, action, coverage, phase).
 
-    def __init__(self, env, coverage: float, max_steps: int):
-        self.env, self.max_steps = env, max_steps
+    The episode is done once the coverage has passed 0.95 at a moment when ``rests_well(state)``
+    says it will stay in place at rest (or after ``max_steps``).
+    """
+
+    def __init__(self, env, coverage: float, max_steps: int, rests_well):
+        self.env, self.max_steps, self.rests_well = env, max_steps, rests_well
         self.coverage = float(coverage)
         self.rows: list[tuple[np.ndarray, np.ndarray, float, int]] = []
         self.success_step: int | None = None
+        self.finish_step: int | None = None
 
     @property
     def n_steps(self) -> int:
@@ -283,7 +293,7 @@ class _Recorder:
 
     @property
     def done(self) -> bool:
-        return self.success_step is not None or self.n_steps >= self.max_steps
+        return self.finish_step is not None or self.n_steps >= self.max_steps
 
     def step(self, target: np.ndarray, phase: int, force: bool = False) -> None:
         if self.done and not force:
@@ -293,8 +303,11 @@ class _Recorder:
         self.rows.append((state, action, self.coverage, phase))
         _, _, _, _, info = self.env.step(action)
         self.coverage = float(info["coverage"])
-        if self.success_step is None and info["is_success"]:
-            self.success_step = self.n_steps
+        if info["is_success"]:
+            if self.success_step is None:
+                self.success_step = self.n_steps
+            if self.finish_step is None and phase != REST and self.rests_well(self.env.get_state()):
+                self.finish_step = self.n_steps
 
     def follow(self, targets: np.ndarray, phase: int) -> None:
         for target in targets:
@@ -303,11 +316,12 @@ class _Recorder:
     def record(self, choices: list[dict], bumps: int) -> EpisodeRecord:
         if not self.rows:  # nothing to do (e.g. max_steps reached while settling)
             return EpisodeRecord(np.empty((0, 5)), np.empty((0, 2)), np.empty(0), np.empty(0, np.int8),
-                                 self.success_step, choices, bumps)
+                                 self.success_step, self.finish_step, choices, bumps)
         states, actions, coverage, phases = zip(*self.rows)
         return EpisodeRecord(states=np.stack(states), actions=np.stack(actions),
                              coverage=np.asarray(coverage), phases=np.asarray(phases, dtype=np.int8),
-                             success_step=self.success_step, route_choices=choices, travel_bumps=bumps)
+                             success_step=self.success_step, finish_step=self.finish_step,
+                             route_choices=choices, travel_bumps=bumps)
 
 
 # --------------------------------------------------------------------------------------------
@@ -325,7 +339,8 @@ def collect_dataset(n_episodes: int, seed: int, progress: bool = True,
         "coverage" (N,)   float64 coverage of the row's state
         "phase"    (N,)   int8 0 settle, 1 travel, 2 push, 3 rest (see ``PHASE_NAMES``)
     Meta: env_id, obs_type, expert, expert_version, expert_config, seed, n_episodes,
-    episode_seeds, failed_seeds, success_steps, route_choices (per episode, one dict per coin
+    episode_seeds, failed_seeds, success_steps (first coverage > 0.95), finish_steps (where the
+    rest begins; see ``EpisodeRecord``), route_choices (per episode, one dict per coin
     toss), rest_steps, coursekit_version. Pixel observations can be rendered from the stored
     states afterwards (``coursekit.envs.pusht_render``).
     """
@@ -340,7 +355,7 @@ def collect_dataset(n_episodes: int, seed: int, progress: bool = True,
         raise ValueError(f"seed must be a non-negative int, got {seed!r}")
     expert = PushTExpert(config)
     env = PushTEnv(obs_type="state", max_episode_steps=expert.config.max_steps)
-    episodes, meta_seeds, failed, success_steps, choices = [], [], [], [], []
+    episodes, meta_seeds, failed, success_steps, finish_steps, choices = [], [], [], [], [], []
     max_attempts = 2 * int(n_episodes) + 10
     with tqdm(total=int(n_episodes), desc="PushT expert", unit="episode", disable=not progress) as bar:
         for attempt in range(max_attempts):
@@ -355,6 +370,7 @@ def collect_dataset(n_episodes: int, seed: int, progress: bool = True,
                              "coverage": rec.coverage, "phase": rec.phases})
             meta_seeds.append(episode_seed)
             success_steps.append(rec.success_step)
+            finish_steps.append(rec.finish_step)
             choices.append(rec.route_choices)
             bar.update(1)
     if len(episodes) < n_episodes:
@@ -366,6 +382,7 @@ def collect_dataset(n_episodes: int, seed: int, progress: bool = True,
         "expert_config": asdict(expert.config),
         "seed": int(seed), "n_episodes": int(n_episodes),
         "episode_seeds": meta_seeds, "failed_seeds": failed, "success_steps": success_steps,
+        "finish_steps": finish_steps,
         "route_choices": choices, "rest_steps": expert.config.rest_steps,
         "phase_names": list(PHASE_NAMES),
         "state_columns": ["agent_x", "agent_y", "block_x", "block_y", "block_angle_unwrapped"],

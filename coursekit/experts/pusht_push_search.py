@@ -84,26 +84,33 @@ class PushSearch:
                 success = t
         return sim.get_state(), success
 
-    def is_success(self, pose: np.ndarray) -> bool:
-        """coverage > 0.95, with a cheap necessary test first (the polygon intersection costs
-        more than a physics step): success needs the T within a few px and degrees of the goal."""
+    def is_success(self, pose: np.ndarray, threshold: float = geo.SUCCESS_THRESHOLD) -> bool:
+        """coverage > ``threshold`` (0.95), with a cheap necessary test first (the polygon
+        intersection costs more than a physics step): the T within a few px and degrees of the goal."""
         gx, gy, ga = geo.GOAL_POSE
         turn = (pose[2] - ga + math.pi) % (2 * math.pi) - math.pi
         if abs(pose[0] - gx) > 15.0 or abs(pose[1] - gy) > 15.0 or abs(turn) > 0.3:
             return False
-        return self._coverage(pose) > geo.SUCCESS_THRESHOLD
+        return self._coverage(pose) > threshold
+
+    def rests_successfully(self, state: np.ndarray) -> bool:
+        """Whether the T at ``state`` (7,) still covers ``final_coverage`` of the goal after
+        ``rest_steps`` steps with the target on the pusher (the pusher coasts to a stop)."""
+        sim = self._sim
+        sim.set_state(state)
+        for _ in range(self.config.rest_steps):
+            sim.physics_step(sim.get_state()[:2])
+        return self.is_success(sim.block_pose(), self.config.final_coverage)
 
     def _evaluate(self, state: np.ndarray, push: Push, extra_steps: float) -> Push:
         """Score ``push`` replayed from ``state``. A push that reaches success counts only if the
-        T is still in place after the rest steps (the pusher coasts on for a little)."""
+        T still covers ``final_coverage`` of the goal after the rest steps (the pusher coasts on
+        for a little), so that demonstrations end well inside the success region."""
         err0 = float(pose_error(state[2:5]))
         end, success = self.simulate(state, push.targets)
         if success is not None:
-            self.simulate(state, push.targets[: success + 1])  # back to the moment of success
-            sim = self._sim
-            for _ in range(self.config.rest_steps):
-                sim.physics_step(sim.get_state()[:2])
-            if not self.is_success(sim.block_pose()):
+            at_success, _ = self.simulate(state, push.targets[: success + 1])
+            if not self.rests_successfully(at_success):
                 success = None
         err1 = 0.5 if success is not None else max(float(pose_error(end[2:5])), 1e-3)
         steps = extra_steps + (len(push.targets) if success is None else success + 1)
