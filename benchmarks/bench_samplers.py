@@ -9,6 +9,7 @@ machine's load (2 cores shared) hits both alike; the median over repeats is repo
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import time
 
@@ -33,8 +34,15 @@ def chunk_ms(sampler, net, cond, shape, seed: int) -> float:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=7, help="alternating DDIM/DDPM repeats (median reported)")
+    parser.add_argument("--threads", type=int, default=None,
+                        help="torch threads (default: torch's own choice); recorded with the result")
     parser.add_argument("--no-record", action="store_true", help="print only, do not write results.json")
     args = parser.parse_args(argv)
+    if args.threads is not None:
+        if args.threads < 1:
+            raise SystemExit(f"--threads must be >= 1, got {args.threads}")
+        torch.set_num_threads(args.threads)
+    command = COMMAND + (f" --threads {args.threads}" if args.threads is not None else "")
 
     torch.manual_seed(0)
     Tp, Da, To, obs_dim = 16, 2, 2, 6
@@ -56,16 +64,19 @@ def main(argv: list[str] | None = None) -> None:
     print(f"DDIM-10  chunk: median {ddim_med:7.1f} ms  (all: {', '.join(f'{x:.0f}' for x in ddim_ms)})")
     print(f"DDPM-100 chunk: median {ddpm_med:7.1f} ms  (all: {', '.join(f'{x:.0f}' for x in ddpm_ms)})")
     print(f"speed-up DDIM-10 over DDPM-100: {speedup:.1f}x")
+    print(f"1-min load average: {os.getloadavg()[0]:.1f}")
     if args.no_record:
         return
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     note = (f"batch 1, Tp={Tp}, Da={Da}, cpu U-Net ({n_params / 1e6:.2f} M), median of {args.repeats} "
-            f"alternating repeats, {torch.get_num_threads()} torch threads")
-    record(SECTION, "DDIM-10 chunk latency (batch 1)", round(ddim_med, 1), "ms", COMMAND, target="< 60 ms", note=note)
-    record(SECTION, "DDPM-100 chunk latency (batch 1)", round(ddpm_med, 1), "ms", COMMAND, note=note)
-    record(SECTION, "DDIM-10 speed-up over DDPM-100", round(speedup, 1), "x", COMMAND, target=">= 8x",
+            f"alternating repeats, {torch.get_num_threads()} torch threads, 1-min load average {load:.1f} "
+            f"on {os.cpu_count()} cores while measuring")
+    record(SECTION, "DDIM-10 chunk latency (batch 1)", round(ddim_med, 1), "ms", command, target="< 60 ms", note=note)
+    record(SECTION, "DDPM-100 chunk latency (batch 1)", round(ddpm_med, 1), "ms", command, note=note)
+    record(SECTION, "DDIM-10 speed-up over DDPM-100", round(speedup, 1), "x", command, target=">= 8x",
            note="same run, same network, " + note)
-    record(SECTION, "U-Net denoising call (batch 1)", round(ddim_med / 10, 2), "ms", COMMAND,
-           note="DDIM-10 chunk / 10")
+    record(SECTION, "U-Net denoising call (batch 1)", round(ddim_med / 10, 2), "ms", command,
+           note="DDIM-10 chunk / 10; " + note)
 
 
 if __name__ == "__main__":
