@@ -110,3 +110,17 @@ def test_bad_arguments_raise():
         DDIMSampler(s, eta=-0.1)
     with pytest.raises(ValueError, match="x_T"):
         DDIMSampler(s).sample(_eps_model(), SHAPE, x_T=torch.zeros(1, 16, 2))
+
+
+@pytest.mark.parametrize("make", [lambda s: DDIMSampler(s, 5), lambda s: DDIMSampler(s, 5, eta=1.0),
+                                  lambda s: DDPMSampler(s, 20)])
+def test_samples_from_a_unet_are_clipped_to_the_action_range(make):
+    from coursekit.nn import ConditionalUnet1D, UNet1DConfig
+
+    torch.manual_seed(0)
+    net = ConditionalUnet1D(2, 3, UNet1DConfig(down_dims=(8, 16), diffusion_step_embed_dim=8)).eval()
+    x0 = make(NoiseSchedule()).sample(net, (2, 8, 2), cond=torch.randn(2, 3),
+                                      generator=torch.Generator().manual_seed(1))
+    assert x0.shape == (2, 8, 2) and torch.isfinite(x0).all()
+    # The last step lands on abar = 1, where x_prev is the clipped x0 estimate itself.
+    assert x0.abs().max() <= 1.0 + 1e-6

@@ -111,6 +111,17 @@ def _randn_like(x: torch.Tensor, generator: torch.Generator | None) -> torch.Ten
     return torch.randn(x.shape, generator=generator, device=device, dtype=x.dtype).to(x.device)
 
 
+def _infer_device(eps_model: EpsModel, cond: Any, x_T: torch.Tensor | None) -> torch.device:
+    """x_T's device, else cond's, else the model's parameters', else cpu."""
+    if x_T is not None:
+        return x_T.device
+    if torch.is_tensor(cond):
+        return cond.device
+    params = eps_model.parameters() if isinstance(eps_model, torch.nn.Module) else iter(())
+    first = next(params, None)
+    return first.device if first is not None else torch.device("cpu")
+
+
 class _Sampler:
     """Shared timestep bookkeeping and the sampling loop; subclasses define ``step``."""
 
@@ -153,7 +164,7 @@ class _Sampler:
             shape: sample shape, e.g. (B, Tp, Da).
             cond: passed to ``eps_model`` unchanged (e.g. global_cond (B, cond_dim)).
             generator: torch.Generator for x_T and the step noise (reproducible by seed).
-            device: where x lives; defaults to x_T's device, else cond's, else cpu.
+            device: where x lives; defaults to x_T's device, else cond's, else the model's, else cpu.
             x_T: starting noise (shape ``shape``); drawn from ``generator`` when None.
             return_trajectory: also return every intermediate x, (n+1, *shape), x_T first.
 
@@ -161,7 +172,7 @@ class _Sampler:
             x0 of shape ``shape`` (normalised units), or ``(x0, trajectory)``.
         """
         if device is None:
-            device = x_T.device if x_T is not None else (cond.device if torch.is_tensor(cond) else "cpu")
+            device = _infer_device(eps_model, cond, x_T)
         if x_T is None:
             gen_device = generator.device if generator is not None else device
             x = torch.randn(tuple(shape), generator=generator, device=gen_device).to(device)
