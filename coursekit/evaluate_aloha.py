@@ -26,13 +26,15 @@ ALOHA_TASKS = {"transfer_cube": "AlohaTransferCubeEnv", "insertion": "AlohaInser
 """Task name -> environment class in :mod:`coursekit.envs.aloha`."""
 
 STATE_COLUMNS = ("stage", "strict_success", *(f"qpos_{i}" for i in range(14)))
-"""Columns of ``EvalResult.states`` recorded by :func:`evaluate_aloha`: (N, T + 1, 16)."""
+"""First 16 columns of ``EvalResult.states`` recorded by :func:`evaluate_aloha`; the rest (nq) is
+the full MuJoCo ``physics_qpos`` (for ``coursekit.viz.mujoco_meshcat`` animations)."""
 
 
 def _record_state(env: Any) -> np.ndarray:
-    """[stage, strict_success, qpos (14)] of an env's current state."""
+    """[stage, strict_success, qpos (14), physics_qpos (nq)] of an env's current state."""
     e = env.unwrapped
-    return np.concatenate([[float(e.stage()), float(e.strict_success())], e.index.qpos14(e.data)])  # (16,)
+    return np.concatenate([[float(e.stage()), float(e.strict_success())], e.index.qpos14(e.data),
+                           e.data.qpos])  # (16 + nq,)
 
 
 def evaluate_aloha(policy: Any, task: str = "transfer_cube", n_episodes: int = 50, seeds: Sequence[int] | None = None,
@@ -50,8 +52,8 @@ def evaluate_aloha(policy: Any, task: str = "transfer_cube", n_episodes: int = 5
         dataset_meta: demonstrations' meta; overlapping seeds are refused.
 
     Returns an :class:`EvalResult` whose ``info`` has "stage_rates" {1..4: rate},
-    "strict_success_rate" and the executor used; ``states`` (N, T+1, 16) holds
-    [stage, strict_success, qpos (14)] per step (see :data:`STATE_COLUMNS`) for plots.
+    "strict_success_rate" and the executor used; ``states`` (N, T+1, 16 + nq) holds
+    [stage, strict_success, qpos (14), physics_qpos (nq)] per step (see :data:`STATE_COLUMNS`).
     """
     import coursekit.envs.aloha as aloha
     from coursekit.data.act_batches import env_obs_features
