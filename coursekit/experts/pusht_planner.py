@@ -15,7 +15,8 @@ plain sampling MPC on raw pusher targets solves only about 10 % of resets). One 
              route is replayed first and slowed down until it does not brush the block;
 4. push      stop short of the contact, re-check the push from the real state, push in along
              the contact normal and hold; then either keep pushing the same contact or back
-             off, whichever the simulator says is better; repeat from 2 until coverage > 0.95;
+             off, whichever the simulator says is better; repeat from 2 until coverage > 0.95
+             at a moment when the T will stay put (``final_coverage`` after resting);
 5. rest      a few steps with the target on the pusher's own position, so that learned
              policies see when to stop (see the lessons in ``diffusion_policy.md``).
 

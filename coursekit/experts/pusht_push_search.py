@@ -107,7 +107,7 @@ class PushSearch:
         """Score ``push`` replayed from ``state``. A push that reaches success counts only if the
         T still covers ``final_coverage`` of the goal after the rest steps (the pusher coasts on
         for a little), so that demonstrations end well inside the success region."""
-        err0 = float(pose_error(state[2:5]))
+        err0 = max(float(pose_error(state[2:5])), 1e-3)
         end, success = self.simulate(state, push.targets)
         if success is not None:
             at_success, _ = self.simulate(state, push.targets[: success + 1])
@@ -153,7 +153,7 @@ class PushSearch:
         pose = state[2:5]
         depths = np.asarray(cfg.push_depths)
         predicted = predict_pushes(pose, self.contacts, depths)  # (M, D, 3)
-        gain = math.log(float(pose_error(pose))) - np.log(np.maximum(pose_error(predicted), 1e-3))  # (M, D)
+        gain = math.log(max(float(pose_error(pose)), 1e-3)) - np.log(np.maximum(pose_error(predicted), 1e-3))  # (M, D)
         lengths = self.routes.lengths(pose, world_to_local(state[:2], pose), self.approach_local).min(axis=0)  # (M,)
         approach_w = local_to_world(self.approach_local, pose)
         reachable = np.isfinite(lengths) & np.all((approach_w >= 0) & (approach_w <= geo.WORLD_SIZE), axis=1)
