@@ -166,3 +166,17 @@ def test_cli_train_then_eval_smoke(tmp_path, capsys):
     assert main(["eval", str(tmp_path / "nope"), "--no-progress"]) == 2  # clear error, no traceback
     assert "not found" in capsys.readouterr().err
     assert not math.isnan(summary["ms_per_chunk"])
+
+
+def test_cli_train_image_policy_smoke(tmp_path):
+    """`coursekit train --features pusht_image` renders frames and trains (the documented GPU command, one step on CPU)."""
+    from coursekit.checkpoint import read_checkpoint_info
+    from coursekit.cli import main
+
+    data = tmp_path / "demos.npz"
+    synthetic_pusht(n_episodes=2, length=12).save(data)
+    out = tmp_path / "img"
+    assert main(["train", "--features", "pusht_image", "--data", str(data), "--steps", "1", "--batch-size", "2",
+                 "--down-dims", "16,32", "--out", str(out), "--no-progress", "--device", "cpu"]) == 0
+    cfg = read_checkpoint_info(out)["config"]
+    assert cfg["obs_type"] == "image" and cfg["vision"]["image_size"] == [96, 96] and cfg["unet"]["down_dims"] == [16, 32]

@@ -1,4 +1,14 @@
-"""``coursekit train``: train a chunk policy on PushT demonstrations and write a checkpoint."""
+"""``coursekit train``: train a chunk policy on PushT demonstrations and write a checkpoint.
+
+Examples::
+
+    coursekit collect pusht --episodes 200 --out demos.npz
+    coursekit train --policy diffusion --data demos.npz --minutes 20 --out runs/dp        # CPU, state
+    coursekit train --policy regression --data demos.npz --minutes 20 --out runs/reg     # the baseline
+    # images (the paper's image PushT setting) -- a GPU job:
+    coursekit train --policy diffusion --features pusht_image --unet paper_image --vision resnet18 \
+        --device cuda --data demos.npz --steps 200000 --out runs/dp_image
+"""
 
 from __future__ import annotations
 
@@ -20,6 +30,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="observation features (default: pusht_state = agent xy, block xy, sin/cos angle)")
     parser.add_argument("--unet", default="cpu", help="U-Net size preset: cpu (default), paper_lowdim, paper_image")
     parser.add_argument("--down-dims", default=None, help="override the preset's U-Net channels, e.g. 32,64,128")
+    parser.add_argument("--vision", default="cpu", help="image encoder preset for --features pusht_image: cpu (default), resnet18")
     parser.add_argument("--n-action-steps", type=int, default=8, help="Ta, actions executed per chunk (default 8)")
     parser.add_argument("--batch-size", type=int, default=None, help="batch size (default 256 low-dim, 64 images)")
     parser.add_argument("--lr", type=float, default=1e-4, help="peak learning rate (default 1e-4)")
@@ -51,10 +62,15 @@ def run(args: argparse.Namespace) -> int:
         except ValueError:
             raise ValueError(f"--down-dims must be comma-separated ints like 32,64,128, got {args.down_dims!r}") from None
         unet = dataclasses.replace(unet, down_dims=dims)
+    extra = {}
+    if args.features == "pusht_image":
+        from coursekit.nn.vision import VisionEncoderConfig
+
+        extra["vision"] = VisionEncoderConfig.preset(args.vision)
     dataset = EpisodeDataset.load(args.data)
     policy, batches = make_pusht_policy(args.policy, dataset, features=args.features, batch_size=batch_size,
                                         seed=args.seed, device=args.device, unet=unet,
-                                        n_action_steps=args.n_action_steps)
+                                        n_action_steps=args.n_action_steps, **extra)
     meta = {**dataset.meta, "path": str(args.data), "n_steps": dataset.n_steps, "n_episodes": dataset.n_episodes}
     print(f"{args.policy} policy, {policy.num_parameters() / 1e6:.2f} M parameters, {len(batches)} windows "
           f"from {dataset.n_episodes} episodes; device {policy.device}")
