@@ -142,7 +142,8 @@ class TrainResult:
         policy: the policy to evaluate (the EMA copy when ``ema`` is on, else the trained one).
         raw_policy: the optimised (non-averaged) policy.
         history: one dict per ``log_every`` steps: step, seconds, lr, samples_per_s, mean of each loss key.
-        summary: steps, samples, seconds, samples_per_s, final_loss, config, ... (stored in checkpoints).
+        summary: steps, samples, seconds, samples_per_s, final_loss, loss_curve ([step, seconds, mean loss]
+            per history row), config, ... (stored in checkpoints).
     """
 
     policy: Any
@@ -197,6 +198,7 @@ def train(policy: Any, batches: Iterable[dict[str, Any]], config: TrainConfig, o
                 "samples_per_s": round(step * config.batch_size / max(seconds, 1e-9), 1),
                 "final_loss": last_loss, "ema_decay": ema.decay if ema else None,
                 "train_config": config_to_dict(config), "torch_threads": threads_used,
+                "loss_curve": [[h["step"], round(h["seconds"], 1), round(h["loss"], 5)] for h in history],
                 "device": str(next(policy.parameters()).device)}
 
     try:
