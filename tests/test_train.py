@@ -180,3 +180,22 @@ def test_cli_train_image_policy_smoke(tmp_path):
                  "--down-dims", "16,32", "--out", str(out), "--no-progress", "--device", "cpu"]) == 0
     cfg = read_checkpoint_info(out)["config"]
     assert cfg["obs_type"] == "image" and cfg["vision"]["image_size"] == [96, 96] and cfg["unet"]["down_dims"] == [16, 32]
+
+
+def test_optimizer_is_adamw_with_the_papers_settings():
+    from coursekit.train import make_optimizer
+
+    torch.manual_seed(0)
+    a, b = torch.nn.Linear(4, 3), torch.nn.Linear(4, 3)
+    b.load_state_dict(a.state_dict())
+    cfg = TrainConfig(max_steps=1)
+    opt_a = make_optimizer(a, cfg)
+    opt_b = torch.optim.AdamW(b.parameters(), lr=1e-4, betas=(0.95, 0.999), weight_decay=1e-6, foreach=False)
+    assert opt_a.param_groups[0]["betas"] == (0.95, 0.999) and opt_a.param_groups[0]["weight_decay"] == 1e-6
+    for _ in range(3):
+        x = torch.randn(8, 4)
+        for m, opt in ((a, opt_a), (b, opt_b)):
+            opt.zero_grad()
+            m(x).square().mean().backward()
+            opt.step()
+    torch.testing.assert_close(a.weight, b.weight, rtol=1e-6, atol=1e-7)
