@@ -131,9 +131,11 @@ def test_training_is_deterministic_by_seed():
 def test_time_budget_stops_the_run_and_checkpoints(tmp_path):
     ds = synthetic_pusht()
     policy, batches = make_pusht_policy("regression", ds, batch_size=8, unet=TINY)
-    cfg = TrainConfig(minutes=0.02, warmup_steps=0, progress=False, ema=False)
+    cfg = TrainConfig(minutes=0.02, warmup_steps=0, progress=False, ema=False, log_every=1)
     result = train(policy, batches, cfg, out_dir=tmp_path / "ckpt", dataset_meta=ds.meta)
     assert 1 <= result.summary["steps"] and result.summary["seconds"] < 30
+    lrs = [h["lr"] for h in result.history]  # cosine over the fraction of the time budget used
+    assert lrs[0] == pytest.approx(1e-4) and all(b <= a for a, b in zip(lrs, lrs[1:]))
     info = json.loads((tmp_path / "ckpt" / "config.json").read_text())
     assert info["training"]["steps"] == result.summary["steps"] and info["dataset"]["env_id"] == "synthetic"
     assert result.policy is policy  # no EMA: the trained policy itself
