@@ -182,6 +182,10 @@ def test_cli_train_image_policy_smoke(tmp_path):
                  "--down-dims", "16,32", "--out", str(out), "--no-progress", "--device", "cpu"]) == 0
     cfg = read_checkpoint_info(out)["config"]
     assert cfg["obs_type"] == "image" and cfg["vision"]["image_size"] == [96, 96] and cfg["unet"]["down_dims"] == [16, 32]
+    from coursekit.checkpoint import load_checkpoint
+
+    policy = load_checkpoint(out, device="cpu")
+    assert policy.config.vision.image_size == (96, 96) and policy.vision_encoder is not None
 
 
 def test_optimizer_is_adamw_with_the_papers_settings():
