@@ -21,14 +21,18 @@ from coursekit.envs.aloha.model import ArmPairIndex
 _IDENTITY_QUAT = np.array([1.0, 0.0, 0.0, 0.0])
 
 
-def _contact_pairs(data: mujoco.MjData) -> set[tuple[int, int]]:
-    """Set of (smaller geom id, larger geom id) for every active contact."""
+_KEY = 1 << 20  # geom-pair key: min(id) * _KEY + max(id), unique for any model with < 2**20 geoms
+
+
+def _contact_keys(data: mujoco.MjData) -> set[int]:
+    """Pair keys of every active contact (see ``_pair_keys``)."""
     geoms = data.contact.geom[: data.ncon]  # (ncon, 2)
-    return {(min(a, b), max(a, b)) for a, b in geoms.tolist()}
+    return set((geoms.min(axis=1) * _KEY + geoms.max(axis=1)).tolist())
 
 
-def _touch(pairs: set[tuple[int, int]], group_a: list[int], group_b: list[int]) -> bool:
-    return any((min(a, b), max(a, b)) in pairs for a in group_a for b in group_b)
+def _pair_keys(group_a: list[int], group_b: list[int]) -> frozenset[int]:
+    """Keys of every (a, b) geom pair between two groups, to intersect with ``_contact_keys``."""
+    return frozenset(min(a, b) * _KEY + max(a, b) for a in group_a for b in group_b)
 
 
 class AlohaTask:
@@ -106,14 +110,18 @@ class TransferCubeTask(AlohaTask):
     def __init__(self, model: mujoco.MjModel) -> None:
         super().__init__(model)
         self.cube = [self._geom("cube")]
+        self._cube_right = _pair_keys(self.cube, self.right_pads)
+        self._cube_left = _pair_keys(self.cube, self.left_pads)
+        self._cube_left_each = [_pair_keys(self.cube, [pad]) for pad in self.left_pads]
+        self._cube_table = _pair_keys(self.cube, self.table)
 
     def stage(self, data: mujoco.MjData) -> int:
         # Published stages: 1 right gripper touches the cube, 2 lifted (right touches, table does
         # not), 3 left gripper touches, 4 left touches and neither the table nor the right does.
-        pairs = _contact_pairs(data)
-        right = _touch(pairs, self.cube, self.right_pads)
-        left = _touch(pairs, self.cube, self.left_pads)
-        table = _touch(pairs, self.cube, self.table)
+        keys = _contact_keys(data)
+        right = not keys.isdisjoint(self._cube_right)
+        left = not keys.isdisjoint(self._cube_left)
+        table = not keys.isdisjoint(self._cube_table)
         stage = 0
         if right:
             stage = 1
@@ -128,10 +136,10 @@ class TransferCubeTask(AlohaTask):
     def strict_success(self, data: mujoco.MjData) -> bool:
         # Held by the left gripper only: both left pads touch the cube, no right pad and not the
         # table, and the cube is clear of the table.
-        pairs = _contact_pairs(data)
-        both_left = all(_touch(pairs, self.cube, [pad]) for pad in self.left_pads)
-        right = _touch(pairs, self.cube, self.right_pads)
-        table = _touch(pairs, self.cube, self.table)
+        keys = _contact_keys(data)
+        both_left = all(not keys.isdisjoint(pad) for pad in self._cube_left_each)
+        right = not keys.isdisjoint(self._cube_right)
+        table = not keys.isdisjoint(self._cube_table)
         z = data.qpos[self.object_qpos_adr[0] + 2]
         return bool(both_left and not right and not table and z > self.min_height)
 
@@ -158,20 +166,26 @@ class InsertionTask(AlohaTask):
         self.peg = [self._geom("peg")]
         self.socket_walls = [self._geom(f"socket_{w}") for w in ("bottom", "top", "back", "front")]
         self.pin = [self._geom("pin")]
+        socket = self.socket_walls + self.pin
+        self._left_socket = _pair_keys(socket, self.left_pads)
+        self._right_peg = _pair_keys(self.peg, self.right_pads)
+        self._peg_table = _pair_keys(self.peg, self.table)
+        self._socket_table = _pair_keys(socket, self.table)
+        self._peg_walls = _pair_keys(self.peg, self.socket_walls)
+        self._peg_pin = _pair_keys(self.peg, self.pin)
         self.peg_body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "peg")
         self.socket_body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "socket")
 
     def stage(self, data: mujoco.MjData) -> int:
         # Published stages: 1 both grippers touch their objects, 2 both lifted, 3 peg touches the
         # socket (both off the table), 4 peg touches the pin.
-        pairs = _contact_pairs(data)
-        socket = self.socket_walls + self.pin
-        left = _touch(pairs, socket, self.left_pads)
-        right = _touch(pairs, self.peg, self.right_pads)
-        peg_table = _touch(pairs, self.peg, self.table)
-        socket_table = _touch(pairs, socket, self.table)
-        peg_socket = _touch(pairs, self.peg, self.socket_walls)
-        pin = _touch(pairs, self.peg, self.pin)
+        keys = _contact_keys(data)
+        left = not keys.isdisjoint(self._left_socket)
+        right = not keys.isdisjoint(self._right_peg)
+        peg_table = not keys.isdisjoint(self._peg_table)
+        socket_table = not keys.isdisjoint(self._socket_table)
+        peg_socket = not keys.isdisjoint(self._peg_walls)
+        pin = not keys.isdisjoint(self._peg_pin)
         stage = 0
         if left and right:
             stage = 1
