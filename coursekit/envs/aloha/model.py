@@ -26,11 +26,11 @@ import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # offscreen rendering on the CPU; must precede `import mujoco`
 
-from dataclasses import dataclass
-from importlib import resources
+from dataclasses import dataclass  # noqa: E402
+from importlib import resources  # noqa: E402
 
-import mujoco
-import numpy as np
+import mujoco  # noqa: E402
+import numpy as np  # noqa: E402
 
 ARMS = ("left", "right")
 """Arm prefixes, in the order of the 14-d layout."""
