@@ -1,10 +1,10 @@
 """Diffusion Policy on PushT: training throughput and the score after a fixed training budget.
 
 Run on a QUIET machine (the numbers are wall-clock): ``.venv/bin/python -m benchmarks.bench_diffusion_policy``
-(about 47 minutes: two 20-minute trainings, evaluations, 1 minute of throughput). Parts:
+(about 48 minutes: two 20-minute trainings, evaluations, 2 minutes of throughput). Parts:
 
-- ``throughput``: samples/s of the CPU-default DiffusionPolicy training step (batch 256, the
-  trainer as used by ``coursekit train``: batching, loss, AdamW, EMA), after a short warm-up.
+- ``throughput``: samples/s of the CPU-default DiffusionPolicy training step (batch 256 and the
+  recipe's batch; the trainer as used by ``coursekit train``: batching, loss, AdamW, EMA).
 - ``score``: demonstrations from the PushT expert (200 episodes, seeds 0..199), DiffusionPolicy
   trained for ``--minutes`` (default 20) on ``--threads`` (default 2) torch threads, evaluated
   with DDIM-10 and DDPM-100 on 50 held-out seeds (100000..100049), 300 steps, mean of max reward;
@@ -13,7 +13,9 @@ Run on a QUIET machine (the numbers are wall-clock): ``.venv/bin/python -m bench
   ``--ship`` copies the trained checkpoints to ``coursekit/checkpoints/`` afterwards.
   ``--parallel`` trains both at once with one thread each (about 25 minutes in all, but each
   policy then gets one core, not two).
-- Variants for the score/time trade-off: ``--down-dims 48,96,192``, ``--batch-size 128``, ``--lr 3e-4``.
+- Recipe: ``--recipe cpu`` (default: lr 5e-4, batch 128, a deliberate departure for a 20-minute
+  budget, see ``TrainConfig.recipe``) or ``--recipe paper`` (lr 1e-4, batch 256). Other variants:
+  ``--down-dims 48,96,192``, ``--batch-size``, ``--lr``.
 
 With ``--threads 2`` on a machine shared with other jobs, torch's two OpenMP threads wait for
 each other at every op and training slows down by one to two orders of magnitude: measure on an
@@ -61,12 +63,12 @@ def load_or_collect(path: Path, n_episodes: int, seed: int) -> EpisodeDataset:
     return dataset
 
 
-def throughput(dataset: EpisodeDataset, threads: int, seconds: float) -> float:
-    """Samples/s of full trainer steps (CPU default config, batch 256) after 5 warm-up steps."""
-    policy, batches = make_pusht_policy("diffusion", dataset, device="cpu")
-    train(policy, batches, TrainConfig(max_steps=5, num_threads=threads, progress=False))  # warm-up
+def throughput(dataset: EpisodeDataset, threads: int, seconds: float, batch_size: int) -> float:
+    """Samples/s of full trainer steps (CPU-default U-Net) after 5 warm-up steps."""
+    policy, batches = make_pusht_policy("diffusion", dataset, device="cpu", batch_size=batch_size)
+    train(policy, batches, TrainConfig(max_steps=5, num_threads=threads, progress=False, batch_size=batch_size))
     result = train(policy, batches, TrainConfig(minutes=seconds / 60, num_threads=threads, progress=False,
-                                                checkpoint_every_minutes=None))
+                                                checkpoint_every_minutes=None, batch_size=batch_size))
     return float(result.summary["samples_per_s"])
 
 
@@ -95,8 +97,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--policies", default="diffusion,regression", help="which to train/evaluate (default both)")
     parser.add_argument("--parallel", action="store_true",
                         help="train diffusion and regression at the same time, one thread each (half the wall-clock time)")
-    parser.add_argument("--lr", type=float, default=1e-4, help="peak learning rate (default 1e-4, the paper's)")
-    parser.add_argument("--batch-size", type=int, default=256, help="batch size (default 256, the paper's)")
+    parser.add_argument("--recipe", choices=["paper", "cpu"], default="cpu",
+                        help="cpu (default): lr 5e-4, batch 128 for a 20-minute budget; paper: lr 1e-4, batch 256")
+    parser.add_argument("--lr", type=float, default=None, help="peak learning rate (default: the recipe's)")
+    parser.add_argument("--batch-size", type=int, default=None, help="batch size (default: the recipe's)")
     parser.add_argument("--down-dims", default="64,128,256", help="U-Net channels (default 64,128,256 = CPU default)")
     parser.add_argument("--seed", type=int, default=0, help="training seed (default 0)")
     parser.add_argument("--out", type=Path, default=ROOT / "outputs" / "bench_dp", help="work directory")
@@ -104,6 +108,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--ship", action="store_true", help="copy the trained checkpoints to coursekit/checkpoints/")
     parser.add_argument("--no-record", action="store_true", help="print only, do not write results.json")
     args = parser.parse_args(argv)
+    base = TrainConfig.recipe(args.recipe, max_steps=1)
+    args.lr = args.lr if args.lr is not None else base.lr
+    args.batch_size = args.batch_size if args.batch_size is not None else base.batch_size
     args.out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(args.threads)
     load = os.getloadavg()[0]
@@ -112,10 +119,12 @@ def main(argv: list[str] | None = None) -> None:
     machine = f"{args.threads} torch threads, load average {load:.1f} at start"
 
     if args.only in (None, "throughput"):
-        sps = throughput(dataset, args.threads, seconds=60.0)
-        print(f"training throughput: {sps:.0f} samples/s")
-        rec(SECTION, "training throughput (CPU default, batch 256)", round(sps), "samples/s", f"{COMMAND} --only throughput",
-            note=f"U-Net 64/128/256 (4.5 M params), full trainer step incl. EMA; 60 s after warm-up; {machine}")
+        for bs in sorted({256, args.batch_size}):
+            sps = throughput(dataset, args.threads, seconds=60.0, batch_size=bs)
+            print(f"training throughput, batch {bs}: {sps:.0f} samples/s")
+            rec(SECTION, f"training throughput (CPU default U-Net, batch {bs})", round(sps), "samples/s",
+                f"{COMMAND} --only throughput",
+                note=f"U-Net 64/128/256 (4.5 M params), full trainer step incl. EMA; 60 s after warm-up; {machine}")
     if args.only == "throughput":
         return
 
@@ -157,8 +166,8 @@ def main(argv: list[str] | None = None) -> None:
         if args.ship:
             shutil.copytree(out, SHIP[kind], dirs_exist_ok=True)
 
-    note = (f"{args.demos} expert demos, {args.minutes:g} min training ({args.down_dims}, batch {args.batch_size}, "
-            f"lr {args.lr:g}), {args.episodes} held-out seeds from 100000, 300 steps, {machine}")
+    note = (f"{args.demos} expert demos, {args.minutes:g} min training (recipe {args.recipe}: U-Net {args.down_dims}, "
+            f"batch {args.batch_size}, lr {args.lr:g}), {args.episodes} held-out seeds from 100000, 300 steps, {machine}")
     cmd = f"{COMMAND} --only score"
     if "diffusion" in kinds:
         dp, dp_ddpm = scores["diffusion DDIM-10"], scores["diffusion DDPM-100"]

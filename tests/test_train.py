@@ -141,6 +141,15 @@ def test_time_budget_stops_the_run_and_checkpoints(tmp_path):
     assert result.policy is policy  # no EMA: the trained policy itself
 
 
+def test_named_recipes():
+    paper = TrainConfig.recipe("paper", max_steps=5)
+    assert (paper.lr, paper.batch_size, paper.betas, paper.weight_decay, paper.warmup_steps) == (1e-4, 256, (0.95, 0.999), 1e-6, 500)
+    cpu = TrainConfig.recipe("cpu", minutes=20, lr=3e-4)
+    assert (cpu.lr, cpu.batch_size, cpu.minutes) == (3e-4, 128, 20)
+    with pytest.raises(ValueError, match="unknown training recipe 'fast'"):
+        TrainConfig.recipe("fast", max_steps=5)
+
+
 def test_train_config_validation_shows_bad_value():
     with pytest.raises(ValueError, match="max_steps or minutes"):
         TrainConfig()

@@ -4,6 +4,7 @@ Examples::
 
     coursekit collect pusht --episodes 200 --out demos.npz
     coursekit train --policy diffusion --data demos.npz --minutes 20 --out runs/dp        # CPU, state
+    coursekit train --recipe cpu --data demos.npz --minutes 20 --out runs/dp_cpu          # lr 5e-4, batch 128
     coursekit train --policy regression --data demos.npz --minutes 20 --out runs/reg     # the baseline
     # images (the paper's image PushT setting) -- a GPU job:
     coursekit train --policy diffusion --features pusht_image --unet paper_image --vision resnet18 \
@@ -32,8 +33,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--down-dims", default=None, help="override the preset's U-Net channels, e.g. 32,64,128")
     parser.add_argument("--vision", default="cpu", help="image encoder preset for --features pusht_image: cpu (default), resnet18")
     parser.add_argument("--n-action-steps", type=int, default=8, help="Ta, actions executed per chunk (default 8)")
-    parser.add_argument("--batch-size", type=int, default=None, help="batch size (default 256 low-dim, 64 images)")
-    parser.add_argument("--lr", type=float, default=1e-4, help="peak learning rate (default 1e-4)")
+    parser.add_argument("--recipe", choices=["paper", "cpu"], default="paper",
+                        help="paper: lr 1e-4, batch 256 (default); cpu: lr 5e-4, batch 128, for a ~20-minute CPU budget")
+    parser.add_argument("--batch-size", type=int, default=None, help="batch size (default: the recipe's; 64 for images)")
+    parser.add_argument("--lr", type=float, default=None, help="peak learning rate (default: the recipe's)")
     parser.add_argument("--warmup-steps", type=int, default=500, help="linear LR warm-up steps (default 500)")
     parser.add_argument("--seed", type=int, default=0, help="seed of weights, batches and noise (default 0)")
     parser.add_argument("--threads", type=int, default=None,
@@ -51,10 +54,11 @@ def run(args: argparse.Namespace) -> int:
 
     if args.minutes is None and args.steps is None:
         raise ValueError("give a budget: --minutes M and/or --steps N")
-    batch_size = args.batch_size or (64 if args.features == "pusht_image" else 256)
-    config = TrainConfig(lr=args.lr, warmup_steps=args.warmup_steps, batch_size=batch_size, max_steps=args.steps,
-                         minutes=args.minutes, seed=args.seed, num_threads=args.threads,
-                         checkpoint_every_minutes=args.checkpoint_every, progress=not args.no_progress)
+    overrides = {"lr": args.lr, "batch_size": args.batch_size or (64 if args.features == "pusht_image" else None)}
+    config = TrainConfig.recipe(args.recipe, **{k: v for k, v in overrides.items() if v is not None},
+                                warmup_steps=args.warmup_steps, max_steps=args.steps, minutes=args.minutes,
+                                seed=args.seed, num_threads=args.threads,
+                                checkpoint_every_minutes=args.checkpoint_every, progress=not args.no_progress)
     unet = UNet1DConfig.preset(args.unet)
     if args.down_dims:
         try:
@@ -68,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
 
         extra["vision"] = VisionEncoderConfig.preset(args.vision)
     dataset = EpisodeDataset.load(args.data)
-    policy, batches = make_pusht_policy(args.policy, dataset, features=args.features, batch_size=batch_size,
+    policy, batches = make_pusht_policy(args.policy, dataset, features=args.features, batch_size=config.batch_size,
                                         seed=args.seed, device=args.device, unet=unet,
                                         n_action_steps=args.n_action_steps, **extra)
     meta = {**dataset.meta, "path": str(args.data), "n_steps": dataset.n_steps, "n_episodes": dataset.n_episodes}
