@@ -61,6 +61,8 @@ def bench_latency(args: argparse.Namespace) -> None:
     from coursekit.policies.diffusion import DiffusionPolicy, DiffusionPolicyConfig
 
     Do, Da = 21, 14
+    if args.latency_threads:
+        torch.set_num_threads(args.latency_threads)
     torch.manual_seed(0)
     act = ACTPolicy(ACTConfig(obs_dim=Do, action_dim=Da), {"obs": MeanStdNormalizer(np.zeros(Do), np.ones(Do)),
                                                            "action": MeanStdNormalizer(np.zeros(Da), np.ones(Da))}).eval()
@@ -245,6 +247,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--threads", type=int, default=2, help="torch threads for training and evaluation (default 2)")
     parser.add_argument("--episodes", type=int, default=50, help="held-out evaluation episodes (default 50)")
     parser.add_argument("--repeats", type=int, default=15, help="latency repeats (default 15)")
+    parser.add_argument("--latency-threads", type=int, default=None, help="torch threads for the latency section (default: torch's)")
     parser.add_argument("--seed", type=int, default=0, help="training seed (default 0)")
     parser.add_argument("--checkpoint", default=None, help="evaluate this ACT checkpoint instead of training (cube/insertion)")
     parser.add_argument("--data-dir", default="outputs/data", help="where demonstrations are cached")
