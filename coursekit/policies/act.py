@@ -33,7 +33,7 @@ checkpoint (normalisers "obs" and "action").
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
