@@ -10,7 +10,9 @@ Run on a QUIET machine (the numbers are wall-clock): ``.venv/bin/python -m bench
   with DDIM-10 and DDPM-100 on 50 held-out seeds (100000..100049), 300 steps, mean of max reward;
   the regression baseline (same backbone, data and trainer; ``--regression-minutes``) evaluated
   the same way. ``--policies diffusion`` skips the baseline; ``--reuse`` only re-evaluates.
-  ``--ship`` copies the trained checkpoints to ``coursekit/checkpoints/`` afterwards.
+  ``--ship`` writes the trained checkpoints (float16 weights, about 9 MB each) to
+  ``coursekit/checkpoints/pusht_{diffusion,regression}_state`` and evaluates those copies, so the
+  recorded scores are exactly what notebook 05 reproduces.
   ``--parallel`` trains both at once with one thread each (about 25 minutes in all, but each
   policy then gets one core, not two).
 - Recipe: ``--recipe cpu`` (default: lr 5e-4, batch 128, a deliberate departure for a 20-minute
@@ -31,14 +33,13 @@ import argparse
 import json
 import multiprocessing
 import os
-import shutil
 import time
 from pathlib import Path
 
 import torch
 
 from benchmarks.results import record
-from coursekit.checkpoint import load_checkpoint
+from coursekit.checkpoint import load_checkpoint, save_checkpoint
 from coursekit.data.episodes import EpisodeDataset
 from coursekit.evaluate import evaluate_pusht
 from coursekit.nn.unet1d import UNet1DConfig
@@ -153,6 +154,10 @@ def main(argv: list[str] | None = None) -> None:
     for kind in kinds:
         out = outs[kind]
         summary = summaries.get(kind) or train_policy(kind, dataset, args, out)
+        if args.ship:  # ship float16 weights (half the size) and evaluate exactly what is shipped
+            save_checkpoint(load_checkpoint(out, device="cpu"), SHIP[kind], half=True,
+                            dataset_meta=json.loads((out / "config.json").read_text())["dataset"], training=summary)
+            out = SHIP[kind]
         policy = load_checkpoint(out, device="cpu")
         samplers = [("ddim", 10), ("ddpm", 100)] if kind == "diffusion" else [(None, None)]
         for sampler, steps in samplers:
@@ -163,8 +168,6 @@ def main(argv: list[str] | None = None) -> None:
             scores[label] = r
             print(f"{label}: score {r.score:.3f} +- {r.summary()['score_stderr']:.3f}, success {r.success_rate:.0%}, "
                   f"{summary['steps']} steps in {summary['seconds']:.0f} s, eval {time.perf_counter() - t0:.0f} s")
-        if args.ship:
-            shutil.copytree(out, SHIP[kind], dirs_exist_ok=True)
 
     note = (f"{args.demos} expert demos, {args.minutes:g} min training (recipe {args.recipe}: U-Net {args.down_dims}, "
             f"batch {args.batch_size}, lr {args.lr:g}), {args.episodes} held-out seeds from 100000, 300 steps, {machine}")

@@ -49,11 +49,13 @@ def _sha256(path: Path) -> str:
 
 
 def save_checkpoint(policy: Any, path: str | os.PathLike, *, dataset_meta: dict[str, Any] | None = None,
-                    training: dict[str, Any] | None = None) -> Path:
+                    training: dict[str, Any] | None = None, half: bool = False) -> Path:
     """Write ``policy`` (a ChunkPolicy) to the directory ``path`` atomically; returns the path.
 
     ``dataset_meta`` (e.g. ``EpisodeDataset.meta``) and ``training`` (the trainer's summary) are
-    stored verbatim in config.json; they must be JSON-serialisable.
+    stored verbatim in config.json; they must be JSON-serialisable. ``half=True`` stores float
+    tensors as float16 (half the size, for checkpoints shipped in the repository); loading casts
+    them back to the policy's float32 parameters.
     """
     from safetensors.torch import save_file
 
@@ -66,6 +68,8 @@ def save_checkpoint(policy: Any, path: str | os.PathLike, *, dataset_meta: dict[
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tensors = {k: v.detach().to("cpu").contiguous().clone() for k, v in policy.state_dict().items()}
+    if half:
+        tensors = {k: v.half() if v.is_floating_point() else v for k, v in tensors.items()}
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
     try:
         weights = tmp / WEIGHTS_FILE
@@ -79,13 +83,18 @@ def save_checkpoint(policy: Any, path: str | os.PathLike, *, dataset_meta: dict[
             "dataset": dataset_meta or {},
             "training": training or {},
             "weights": {"file": WEIGHTS_FILE, "sha256": _sha256(weights), "n_tensors": len(tensors),
+                        "dtype": "float16" if half else "float32",
                         "n_parameters": int(sum(p.numel() for p in policy.parameters()))},
             "coursekit_version": coursekit.__version__,
         }
         (tmp / CONFIG_FILE).write_text(json.dumps(info, indent=1, sort_keys=True) + "\n")
+        umask = os.umask(0)
+        os.umask(umask)
         for f in (weights, tmp / CONFIG_FILE):
             with open(f, "rb") as fh:
                 os.fsync(fh.fileno())
+            os.chmod(f, 0o666 & ~umask)  # ordinary file modes, not mkdtemp's private 0600/0700
+        os.chmod(tmp, 0o777 & ~umask)
         # Swap directories: old -> aside, new -> path, then delete the old one.
         old = None
         if path.exists():
@@ -174,5 +183,5 @@ def load_checkpoint(path: str | os.PathLike, device: Any = "auto", expected_type
         if tuple(t.shape) != tuple(expected[name].shape):
             raise CheckpointError(f"checkpoint {str(path)!r}: tensor {name!r} has shape {tuple(t.shape)}, "
                                   f"the config builds {tuple(expected[name].shape)}")
-    policy.load_state_dict(tensors, strict=True)
+    policy.load_state_dict(tensors, strict=True)  # copies (and casts float16 storage) into the parameters
     return policy.to(resolve_device(device)).eval()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import pickle
 
 import numpy as np
@@ -51,6 +52,10 @@ def test_round_trip_gives_identical_predictions(saved):
     assert info["policy_type"] == "diffusion" and info["training"]["steps"] == 7
     assert info["dataset"]["n_episodes"] == 3 and info["weights"]["sha256"] == _sha256(path / "model.safetensors")
     assert sorted(p.name for p in path.iterdir()) == ["config.json", "model.safetensors"]
+    umask = os.umask(0)
+    os.umask(umask)
+    assert path.stat().st_mode & 0o777 == 0o777 & ~umask  # ordinary modes, not mkdtemp's private ones
+    assert all(p.stat().st_mode & 0o777 == 0o666 & ~umask for p in path.iterdir())
 
 
 def test_overwrite_is_atomic_and_leaves_no_temporary_files(saved, tmp_path):
@@ -68,6 +73,17 @@ def test_regression_round_trip(tmp_path):
     loaded = load_checkpoint(save_checkpoint(policy, tmp_path / "r"), device="cpu", expected_type="regression")
     obs = np.random.default_rng(0).uniform(0, 400, (2, 2, 6)).astype(np.float32)
     np.testing.assert_array_equal(policy.predict_chunk(obs), loaded.predict_chunk(obs))
+
+
+def test_half_precision_storage_loads_into_float32(saved, tmp_path):
+    policy, path = saved
+    half = save_checkpoint(policy, tmp_path / "half", half=True)
+    assert (half / "model.safetensors").stat().st_size < 0.6 * (path / "model.safetensors").stat().st_size
+    loaded = load_checkpoint(half, device="cpu")
+    assert all(p.dtype == torch.float32 for p in loaded.parameters())
+    assert read_checkpoint_info(half)["weights"]["dtype"] == "float16"
+    for (name, a), b in zip(policy.state_dict().items(), loaded.state_dict().values()):
+        torch.testing.assert_close(b, a.half().float(), msg=name)
 
 
 def _edit_config(path, fn):
