@@ -6,6 +6,8 @@ Examples::
     coursekit train --policy diffusion --data demos.npz --minutes 20 --out runs/dp        # CPU, state
     coursekit train --recipe cpu --data demos.npz --minutes 20 --out runs/dp_cpu          # lr 5e-4, batch 128
     coursekit train --policy regression --data demos.npz --minutes 20 --out runs/reg     # the baseline
+    coursekit collect aloha-cube --out cube.npz
+    coursekit train --policy act --recipe cpu --data cube.npz --minutes 30 --out runs/act_cube  # ACT
     # images (the paper's image PushT setting) -- a GPU job:
     coursekit train --policy diffusion --features pusht_image --unet paper_image --vision resnet18 \
         --device cuda --data demos.npz --steps 200000 --out runs/dp_image
@@ -18,26 +20,30 @@ import dataclasses
 import json
 from pathlib import Path
 
-HELP = "train a Diffusion Policy (or the regression baseline) on PushT demonstrations"
+HELP = "train a chunk policy (diffusion, regression baseline or act) on demonstrations and write a checkpoint"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--policy", choices=["diffusion", "regression"], default="diffusion", help="policy head (default: diffusion)")
-    parser.add_argument("--data", type=Path, required=True, help="demonstrations .npz (from `coursekit collect pusht`)")
+    parser.add_argument("--policy", choices=["diffusion", "regression", "act"], default="diffusion",
+                        help="policy head (default: diffusion; act = ACT, the transformer CVAE)")
+    parser.add_argument("--data", type=Path, required=True, help="demonstrations .npz (from `coursekit collect ...`)")
     parser.add_argument("--out", type=Path, required=True, help="checkpoint directory to write (model.safetensors + config.json)")
     parser.add_argument("--minutes", type=float, default=None, help="wall-clock training budget in minutes")
     parser.add_argument("--steps", type=int, default=None, help="optimiser steps (default: until --minutes is used up)")
-    parser.add_argument("--features", choices=["pusht_state", "pusht_keypoints", "pusht_image"], default="pusht_state",
-                        help="observation features (default: pusht_state = agent xy, block xy, sin/cos angle)")
+    parser.add_argument("--features", choices=["pusht_state", "pusht_keypoints", "pusht_image", "aloha_state", "aloha_qpos"],
+                        default=None, help="observation features (default: pusht_state = agent xy, block xy, sin/cos "
+                                           "angle for diffusion/regression; read from the data for act)")
+    parser.add_argument("--chunk-size", type=int, default=None, help="k, actions per ACT chunk (default: ACTConfig's)")
     parser.add_argument("--unet", default="cpu", help="U-Net size preset: cpu (default), paper_lowdim, paper_image")
     parser.add_argument("--down-dims", default=None, help="override the preset's U-Net channels, e.g. 32,64,128")
     parser.add_argument("--vision", default="cpu", help="image encoder preset for --features pusht_image: cpu (default), resnet18")
     parser.add_argument("--n-action-steps", type=int, default=8, help="Ta, actions executed per chunk (default 8)")
     parser.add_argument("--recipe", choices=["paper", "cpu"], default="paper",
-                        help="paper: lr 1e-4, batch 256 (default); cpu: lr 5e-4, batch 128, for a ~20-minute CPU budget")
+                        help="paper (default): the paper's optimiser (DP lr 1e-4, batch 256; ACT lr 1e-5, batch 8); "
+                             "cpu: tuned for a 20-30 minute CPU budget (DP lr 5e-4, batch 128; ACT lr 3e-4, batch 16)")
     parser.add_argument("--batch-size", type=int, default=None, help="batch size (default: the recipe's; 64 for images)")
     parser.add_argument("--lr", type=float, default=None, help="peak learning rate (default: the recipe's)")
-    parser.add_argument("--warmup-steps", type=int, default=500, help="linear LR warm-up steps (default 500)")
+    parser.add_argument("--warmup-steps", type=int, default=None, help="linear LR warm-up steps (default: the recipe's)")
     parser.add_argument("--seed", type=int, default=0, help="seed of weights, batches and noise (default 0)")
     parser.add_argument("--threads", type=int, default=None,
                         help="torch CPU threads (default: torch's choice; use 1 on a machine shared with other jobs)")
@@ -50,13 +56,18 @@ def run(args: argparse.Namespace) -> int:
     from coursekit.data.episodes import EpisodeDataset
     from coursekit.nn.unet1d import UNet1DConfig
     from coursekit.policies.factory import make_pusht_policy
-    from coursekit.train import TrainConfig, train
+    from coursekit.train import TrainConfig
 
     if args.minutes is None and args.steps is None:
         raise ValueError("give a budget: --minutes M and/or --steps N")
-    overrides = {"lr": args.lr, "batch_size": args.batch_size or (64 if args.features == "pusht_image" else None)}
-    config = TrainConfig.recipe(args.recipe, **{k: v for k, v in overrides.items() if v is not None},
-                                warmup_steps=args.warmup_steps, max_steps=args.steps, minutes=args.minutes,
+    if args.policy == "act":
+        return _run_act(args)
+    features = args.features or "pusht_state"
+    if features.startswith("aloha"):
+        raise ValueError(f"--features {features} is for --policy act; diffusion/regression train on PushT features here")
+    overrides = {"lr": args.lr, "batch_size": args.batch_size or (64 if features == "pusht_image" else None),
+                 "warmup_steps": args.warmup_steps}
+    config = TrainConfig.recipe(args.recipe, **{k: v for k, v in overrides.items() if v is not None}, max_steps=args.steps, minutes=args.minutes,
                                 seed=args.seed, num_threads=args.threads,
                                 checkpoint_every_minutes=args.checkpoint_every, progress=not args.no_progress)
     unet = UNet1DConfig.preset(args.unet)
@@ -67,17 +78,42 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"--down-dims must be comma-separated ints like 32,64,128, got {args.down_dims!r}") from None
         unet = dataclasses.replace(unet, down_dims=dims)
     extra = {}
-    if args.features == "pusht_image":
+    if features == "pusht_image":
         from coursekit.nn.vision import VisionEncoderConfig
 
         extra["vision"] = VisionEncoderConfig.preset(args.vision)
     dataset = EpisodeDataset.load(args.data)
-    policy, batches = make_pusht_policy(args.policy, dataset, features=args.features, batch_size=config.batch_size,
+    policy, batches = make_pusht_policy(args.policy, dataset, features=features, batch_size=config.batch_size,
                                         seed=args.seed, device=args.device, unet=unet,
                                         n_action_steps=args.n_action_steps, **extra)
     meta = {**dataset.meta, "path": str(args.data), "n_steps": dataset.n_steps, "n_episodes": dataset.n_episodes}
     print(f"{args.policy} policy, {policy.num_parameters() / 1e6:.2f} M parameters, {len(batches)} windows "
           f"from {dataset.n_episodes} episodes; device {policy.device}")
+    return _train_and_report(policy, batches, config, args, meta)
+
+
+def _run_act(args: argparse.Namespace) -> int:
+    """ACT: the same trainer and checkpoint format; its optimiser recipe from ``act_train_config``."""
+    from coursekit.data.episodes import EpisodeDataset
+    from coursekit.policies.act_factory import act_train_config, make_act_policy
+
+    overrides = {"lr": args.lr, "batch_size": args.batch_size, "warmup_steps": args.warmup_steps}
+    config = act_train_config(args.recipe, **{k: v for k, v in overrides.items() if v is not None},
+                              max_steps=args.steps, minutes=args.minutes, seed=args.seed, num_threads=args.threads,
+                              checkpoint_every_minutes=args.checkpoint_every, progress=not args.no_progress)
+    dataset = EpisodeDataset.load(args.data)
+    extra = {} if args.chunk_size is None else {"chunk_size": args.chunk_size}
+    policy, batches = make_act_policy(dataset, features=args.features, batch_size=config.batch_size, seed=args.seed,
+                                      device=args.device, **extra)
+    meta = {**dataset.meta, "path": str(args.data), "n_steps": dataset.n_steps, "n_episodes": dataset.n_episodes}
+    print(f"act policy ({policy.config.features}), {policy.num_parameters() / 1e6:.2f} M parameters, "
+          f"k = {policy.config.chunk_size}, {dataset.n_episodes} episodes; device {policy.device}")
+    return _train_and_report(policy, batches, config, args, meta)
+
+
+def _train_and_report(policy, batches, config, args: argparse.Namespace, meta: dict) -> int:
+    from coursekit.train import train
+
     result = train(policy, batches, config, out_dir=args.out, dataset_meta=meta)
     s = result.summary
     print(json.dumps({k: s[k] for k in ("steps", "seconds", "samples_per_s", "final_loss")}))
