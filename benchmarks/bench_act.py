@@ -171,6 +171,8 @@ def bench_aloha_act(task: str, args: argparse.Namespace) -> None:
         target = (">= 80 % (30 min), ship >= 90 %" if task == "transfer_cube" else "ship >= 40 %") \
             if name.startswith("temporal") else ""
         cmd = f"{COMMAND} --only {'cube' if task == 'transfer_cube' else 'insertion'}"
+        if args.checkpoint:  # evaluated a given checkpoint: say which, not a training run
+            cmd += f" --checkpoint {args.checkpoint}"
         record(SECTION, f"ACT {label} success, {name} (strict, final state)", round(100 * r.info["strict_success_rate"], 1),
                "%", cmd, target=target, note=note)
         record(SECTION, f"ACT {label} success, {name} (stage 4 at any step)", round(100 * rates[4], 1), "%", cmd, note=note)
