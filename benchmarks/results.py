@@ -46,10 +46,12 @@ def _fmt(v: float | str) -> str:
 
 
 def render_table() -> str:
-    rows = ["| section | figure | value | target | command |", "|---|---|---|---|---|"]
+    rows = ["| section | figure | value | target | conditions | command |", "|---|---|---|---|---|---|"]
     for entry in sorted(load().values(), key=lambda e: (e["section"], e["name"])):
         val = f"{_fmt(entry['value'])} {entry['unit']}".strip()
-        rows.append(f"| {entry['section']} | {entry['name']} | {val} | {entry['target']} | `{entry['command']}` |")
+        note = entry.get("note", "").replace("|", "/")
+        rows.append(f"| {entry['section']} | {entry['name']} | {val} | {entry['target']} | {note} "
+                    f"(measured {entry['measured']}) | `{entry['command']}` |")
     return "\n".join(rows)
 
 
