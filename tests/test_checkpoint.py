@@ -21,13 +21,7 @@ NORMS = {"obs": MinMaxNormalizer(np.arange(6.0), np.arange(6.0) + 400),
          "action": MinMaxNormalizer(np.full(2, 20.0), np.full(2, 480.0))}
 
 
-@pytest.fixture(autouse=True)
-def _one_torch_thread():
-    """Small ops: one thread is as fast, and immune to oversubscription on a shared CPU."""
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")  # fixture in tests/conftest.py
 
 
 @pytest.fixture

@@ -15,13 +15,7 @@ from coursekit.policies.regression import RegressionPolicy, RegressionPolicyConf
 TINY = UNet1DConfig(down_dims=(16, 32), kernel_size=3, n_groups=4, diffusion_step_embed_dim=16)
 
 
-@pytest.fixture(autouse=True)
-def _one_torch_thread():
-    """Small ops: one thread is as fast, and immune to oversubscription on a shared CPU."""
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")  # fixture in tests/conftest.py
 
 
 NORMS = {"obs": MinMaxNormalizer(np.zeros(6), np.full(6, 500.0)),
