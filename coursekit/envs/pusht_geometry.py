@@ -100,6 +100,19 @@ def _check_pose(pose) -> tuple[float, float, float]:
     return float(p[0]), float(p[1]), float(p[2])
 
 
+def as_state5(state) -> np.ndarray:
+    """The first five entries [ax, ay, bx, by, angle] of a PushT state as float64, validated.
+
+    Accepts the 5-d observation or the env's longer 7-d state (extra entries are ignored).
+    """
+    s = np.asarray(state, dtype=np.float64)
+    if s.ndim != 1 or s.shape[0] < 5:
+        raise ValueError(f"state must be (5,) [ax, ay, bx, by, angle] (extra entries ignored), got shape {s.shape}")
+    if not np.all(np.isfinite(s[:5])):
+        raise ValueError(f"state must be finite, got {s[:5].tolist()!r}")
+    return s[:5]
+
+
 def local_to_world(points: np.ndarray, pose) -> np.ndarray:
     """Map body-local points (N, 2) to world coordinates (N, 2) for ``pose`` = (x, y, angle)."""
     x, y, a = _check_pose(pose)

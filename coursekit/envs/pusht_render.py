@@ -41,15 +41,6 @@ def _size_hw(size) -> tuple[int, int]:
     return int(hw[0]), int(hw[1])
 
 
-def _check_state(state) -> np.ndarray:
-    s = np.asarray(state, dtype=np.float64)
-    if s.ndim != 1 or s.shape[0] < 5:
-        raise ValueError(f"state must be (5,) [ax, ay, bx, by, angle] (extra entries ignored), got shape {s.shape}")
-    if not np.all(np.isfinite(s[:5])):
-        raise ValueError(f"state must be finite, got {s[:5].tolist()!r}")
-    return s[:5]
-
-
 class PushTRenderer:
     """Renders PushT states to (H, W, 3) uint8 images; the static part (walls, goal) is drawn once.
 
@@ -86,7 +77,7 @@ class PushTRenderer:
 
     def render(self, state, target=None) -> np.ndarray:
         """(H, W, 3) uint8 image of ``state`` = [ax, ay, bx, by, angle]; ``target`` (2,) optional."""
-        s = _check_state(state)
+        s = geo.as_state5(state)
         img = self._background.copy()
         draw = ImageDraw.Draw(img)
         outline_w = max(1, round(2.0 * self._unit))

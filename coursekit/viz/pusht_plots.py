@@ -32,15 +32,6 @@ TARGET_COLOR = "crimson"
 WALL_COLOR = "lightgray"
 
 
-def _state5(state) -> np.ndarray:
-    s = np.asarray(state, dtype=np.float64)
-    if s.ndim != 1 or s.shape[0] < 5:
-        raise ValueError(f"state must be (5,) [ax, ay, bx, by, angle] or longer, got shape {s.shape}")
-    if not np.all(np.isfinite(s[:5])):
-        raise ValueError(f"state must be finite, got {s[:5].tolist()!r}")
-    return s[:5]
-
-
 def _states(states) -> np.ndarray:
     s = np.asarray(states, dtype=np.float64)
     if s.ndim != 2 or s.shape[1] < 5 or len(s) == 0:
@@ -78,7 +69,7 @@ class SceneArtists:
 
     def update(self, state, target=None) -> list:
         """Move block and pusher to ``state`` (and the target marker to ``target``)."""
-        s = _state5(state)
+        s = geo.as_state5(state)
         self.block.set_xy(geo.block_outline(s[2:5]))
         self.agent.center = (s[0], s[1])
         if self.target is not None:
@@ -97,7 +88,7 @@ def draw_scene(ax: Axes, state, target=None, goal: bool = True, walls: bool = Tr
     ``target`` (2,) marks the action target with a cross (``show_target`` forces the marker to
     exist even when ``target`` is None, for animations).
     """
-    s = _state5(state)
+    s = geo.as_state5(state)
     setup_world_axes(ax, title)
     if walls:
         lo, hi = geo.WALL_LO, geo.WALL_HI
@@ -236,7 +227,7 @@ def plot_trajectories(paths, scene_state=None, colors: Sequence | None = None,
         ax.add_patch(Polygon(geo.block_outline(geo.GOAL_POSE), closed=True, facecolor=GOAL_COLOR,
                              edgecolor="none", zorder=1))
     for s in end_states or []:
-        ax.add_patch(Polygon(geo.block_outline(_state5(s)[2:5]), closed=True, facecolor="none",
+        ax.add_patch(Polygon(geo.block_outline(geo.as_state5(s)[2:5]), closed=True, facecolor="none",
                              edgecolor=BLOCK_EDGE, ls=":", lw=0.8, zorder=2))
     seen = set()
     for i, p in enumerate(arrs):
