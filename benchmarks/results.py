@@ -64,3 +64,29 @@ def render_readme() -> None:
     head, rest = text.split(START, 1)
     _, tail = rest.split(END, 1)
     atomic_write_text(README, f"{head}{START}\n{render_table()}\n{END}{tail}")
+
+
+def drop(keys: list[str]) -> None:
+    """Remove rows (``section/name`` keys) that no benchmark writes any more, e.g. after a rename."""
+    table = load()
+    unknown = [k for k in keys if k not in table]
+    if unknown:
+        raise KeyError(f"no such rows {unknown}; known: {sorted(table)}")
+    for k in keys:
+        del table[k]
+    atomic_write_text(RESULTS, json.dumps(table, indent=1, sort_keys=True) + "\n")
+    render_readme()
+
+
+if __name__ == "__main__":
+    import argparse
+
+    parser = argparse.ArgumentParser(description="maintain benchmarks/results.json and the README table")
+    parser.add_argument("--drop", nargs="+", default=[], metavar="KEY", help="remove rows by 'section/name'")
+    parser.add_argument("--list", action="store_true", help="print the row keys")
+    args = parser.parse_args()
+    if args.drop:
+        drop(args.drop)
+    if args.list:
+        print("\n".join(sorted(load())))
+    render_readme()

@@ -248,6 +248,7 @@ def evaluate_pusht(policy: Any, n_episodes: int = 50, seeds: Sequence[int] | Non
     result.info.update({"policy_type": getattr(policy, "policy_type", ""), "max_steps": max_steps,
                         "n_action_steps": c.n_action_steps, "sampling_seed": seed})
     if hasattr(policy, "make_sampler"):  # diffusion: which sampler and how many steps really ran
-        result.info.update({"sampler": sampler or c.sampler,
-                            "num_inference_steps": len(policy.make_sampler(sampler, num_inference_steps).timesteps)})
+        used = policy.make_sampler(sampler, num_inference_steps)
+        result.info.update({"sampler": sampler or c.sampler, "num_inference_steps": len(used.timesteps),
+                            "first_timestep": int(used.timesteps[0])})
     return result

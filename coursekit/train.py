@@ -183,7 +183,8 @@ def make_optimizer(policy: torch.nn.Module, config: TrainConfig) -> torch.optim.
 
 def train(policy: Any, batches: Iterable[dict[str, Any]], config: TrainConfig, out_dir: str | Path | None = None,
           dataset_meta: dict[str, Any] | None = None,
-          callback: Callable[[int, dict[str, float]], None] | None = None) -> TrainResult:
+          callback: Callable[[int, dict[str, float]], None] | None = None,
+          init_from: dict[str, Any] | None = None) -> TrainResult:
     """Train ``policy`` in place on ``batches`` (an endless iterable of batch dicts) under ``config``.
 
     Args:
@@ -193,6 +194,9 @@ def train(policy: Any, batches: Iterable[dict[str, Any]], config: TrainConfig, o
         out_dir: if given, the (EMA) policy is checkpointed there periodically and at the end.
         dataset_meta: stored in the checkpoint beside the training summary.
         callback: called as ``callback(step, logged_row)`` at every history row.
+        init_from: provenance of the weights ``policy`` starts from when this run continues an
+            earlier one (a warm start); stored as ``summary["init_from"]`` so a checkpoint states
+            its whole training, not only the last segment.
     """
     from coursekit.checkpoint import save_checkpoint
 
@@ -221,7 +225,8 @@ def train(policy: Any, batches: Iterable[dict[str, Any]], config: TrainConfig, o
                 "final_loss": last_loss, "ema_decay": ema.decay if ema else None,
                 "train_config": config_to_dict(config), "torch_threads": threads_used,
                 "loss_curve": [[h["step"], round(h["seconds"], 1), round(h["loss"], 5)] for h in history],
-                "device": str(next(policy.parameters()).device)}
+                "device": str(next(policy.parameters()).device),
+                **({"init_from": init_from} if init_from is not None else {})}
 
     try:
         batch_iter = iter(batches)

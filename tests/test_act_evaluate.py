@@ -30,6 +30,8 @@ def test_factory_and_recipes():
     assert set(policy.normalizers) == {"obs", "action"} and len(batches) == ds.n_steps
     paper = act_train_config("paper", max_steps=1)
     assert (paper.lr, paper.weight_decay, paper.batch_size, paper.lr_schedule, paper.ema) == (1e-5, 1e-4, 8, "constant", False)
+    cpu = act_train_config("cpu", max_steps=1)
+    assert (cpu.lr, cpu.batch_size, cpu.lr_schedule, cpu.warmup_steps) == (3e-4, 16, "cosine", 200)
     with pytest.raises(ValueError, match="preset"):
         act_train_config("gpu", max_steps=1)
 

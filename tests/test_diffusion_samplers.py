@@ -22,9 +22,9 @@ def _eps_model():
     return eps_model
 
 
-def _reference(kind: str, T: int, n: int):
+def _reference(kind: str, T: int, n: int, spacing: str = "leading"):
     kw = dict(num_train_timesteps=T, beta_schedule="squaredcos_cap_v2", clip_sample=True,
-              prediction_type="epsilon")
+              prediction_type="epsilon", timestep_spacing=spacing)
     if kind == "ddpm":
         sched = diffusers.DDPMScheduler(variance_type="fixed_small", **kw)
     else:
@@ -59,6 +59,14 @@ def test_ddpm_matches_diffusers_step_for_step(n):
 def test_ddim_matches_diffusers_step_for_step(n, eta):
     schedule = NoiseSchedule(num_train_timesteps=100)
     _compare(DDIMSampler(schedule, num_inference_steps=n, eta=eta), _reference("ddim", 100, n), eta=eta)
+
+
+@pytest.mark.parametrize("n,eta", [(10, 0.0), (16, 0.0), (8, 0.5), (100, 0.0), (7, 0.0)])
+def test_ddim_trailing_spacing_matches_diffusers_step_for_step(n, eta):
+    schedule = NoiseSchedule(num_train_timesteps=100)
+    ours = DDIMSampler(schedule, num_inference_steps=n, eta=eta, timestep_spacing="trailing")
+    assert ours.timesteps[0] == 99  # starts at the last trained timestep
+    _compare(ours, _reference("ddim", 100, n, "trailing"), eta=eta)
 
 
 def test_clipping_is_exercised_and_still_matches():
@@ -108,6 +116,8 @@ def test_bad_arguments_raise():
         DDPMSampler(s, num_inference_steps=101)
     with pytest.raises(ValueError, match="eta"):
         DDIMSampler(s, eta=-0.1)
+    with pytest.raises(ValueError, match="'middle'"):
+        DDIMSampler(s, timestep_spacing="middle")
     with pytest.raises(ValueError, match="x_T"):
         DDIMSampler(s).sample(_eps_model(), SHAPE, x_T=torch.zeros(1, 16, 2))
 

@@ -21,6 +21,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-steps", type=int, default=None, help="steps per episode (default 300 PushT, 400 ALOHA)")
     parser.add_argument("--sampler", choices=["ddim", "ddpm"], default=None, help="diffusion sampler (default: the checkpoint's)")
     parser.add_argument("--steps", type=int, default=None, help="denoising steps (default: 10 for DDIM, 100 for DDPM)")
+    parser.add_argument("--ddim-spacing", choices=["leading", "trailing"], default=None,
+                        help="DDIM timesteps: leading (90, 80, ..., 0) or trailing (99, 89, ..., 9) (default: the checkpoint's)")
     parser.add_argument("--n-action-steps", type=int, default=None, help="override Ta, actions executed per chunk")
     parser.add_argument("--no-ensembling", action="store_true",
                         help="ACT: execute chunks by receding horizon instead of temporal ensembling")
@@ -54,6 +56,10 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"--ensemble-decay must be >= 0, got {args.ensemble_decay}")
         c.temporal_ensembling = not args.no_ensembling
         c.ensemble_decay = c.ensemble_decay if args.ensemble_decay is None else args.ensemble_decay
+    if args.ddim_spacing is not None:
+        if not hasattr(c, "ddim_timestep_spacing"):
+            raise ValueError(f"--ddim-spacing applies to diffusion checkpoints, this one is {info.get('policy_type')!r}")
+        c.ddim_timestep_spacing = args.ddim_spacing
     if str(getattr(c, "features", "")).startswith("aloha"):
         return _run_aloha(args, policy, info, seeds)
     factory = None

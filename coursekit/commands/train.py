@@ -44,10 +44,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--batch-size", type=int, default=None, help="batch size (default: the recipe's; 64 for images)")
     parser.add_argument("--lr", type=float, default=None, help="peak learning rate (default: the recipe's)")
     parser.add_argument("--warmup-steps", type=int, default=None, help="linear LR warm-up steps (default: the recipe's)")
+    parser.add_argument("--lr-schedule", choices=["cosine", "constant"], default=None,
+                        help="after warm-up: cosine decay to 0 over the budget or constant (default: the recipe's; "
+                             "cosine, except ACT --recipe paper: constant)")
     parser.add_argument("--seed", type=int, default=0, help="seed of weights, batches and noise (default 0)")
     parser.add_argument("--threads", type=int, default=None,
                         help="torch CPU threads (default: torch's choice; use 1 on a machine shared with other jobs)")
     parser.add_argument("--device", default="auto", help="auto, cpu, cuda, mps (default auto)")
+    parser.add_argument("--init-from", type=Path, default=None,
+                        help="warm start: begin from this checkpoint's weights (same policy type, config and data "
+                             "normalisers) with a fresh optimiser and LR schedule; its training summary is kept as "
+                             "training.init_from in the new checkpoint")
     parser.add_argument("--checkpoint-every", type=float, default=5.0, help="minutes between periodic checkpoints (default 5)")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
@@ -66,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
     if features.startswith("aloha"):
         raise ValueError(f"--features {features} is for --policy act; diffusion/regression train on PushT features here")
     overrides = {"lr": args.lr, "batch_size": args.batch_size or (64 if features == "pusht_image" else None),
-                 "warmup_steps": args.warmup_steps}
+                 "warmup_steps": args.warmup_steps, "lr_schedule": args.lr_schedule}
     config = TrainConfig.recipe(args.recipe, **{k: v for k, v in overrides.items() if v is not None}, max_steps=args.steps, minutes=args.minutes,
                                 seed=args.seed, num_threads=args.threads,
                                 checkpoint_every_minutes=args.checkpoint_every, progress=not args.no_progress)
@@ -97,7 +104,8 @@ def _run_act(args: argparse.Namespace) -> int:
     from coursekit.data.episodes import EpisodeDataset
     from coursekit.policies.act_factory import act_train_config, make_act_policy
 
-    overrides = {"lr": args.lr, "batch_size": args.batch_size, "warmup_steps": args.warmup_steps}
+    overrides = {"lr": args.lr, "batch_size": args.batch_size, "warmup_steps": args.warmup_steps,
+                 "lr_schedule": args.lr_schedule}
     config = act_train_config(args.recipe, **{k: v for k, v in overrides.items() if v is not None},
                               max_steps=args.steps, minutes=args.minutes, seed=args.seed, num_threads=args.threads,
                               checkpoint_every_minutes=args.checkpoint_every, progress=not args.no_progress)
@@ -111,10 +119,39 @@ def _run_act(args: argparse.Namespace) -> int:
     return _train_and_report(policy, batches, config, args, meta)
 
 
+def warm_start(policy, path: Path) -> dict:
+    """Copy the weights of the checkpoint ``path`` into ``policy``; returns that checkpoint's provenance.
+
+    The checkpoint must hold the same policy type with the same config and the same normalisers
+    (i.e. it was trained on the same kind of data): anything else is refused with the difference.
+    Only weights carry over; the optimiser state does not (checkpoints do not store it), so the
+    continued run starts a fresh warm-up + schedule.
+    """
+    from coursekit.checkpoint import CheckpointError, load_checkpoint, read_checkpoint_info
+    from coursekit.config import config_to_dict
+    from coursekit.policies.base import normalizers_to_json
+
+    source = load_checkpoint(path, device=policy.device, expected_type=policy.policy_type)
+    mine, theirs = config_to_dict(policy.config), config_to_dict(source.config)
+    diff = {k: (theirs.get(k), mine.get(k)) for k in sorted(set(mine) | set(theirs)) if mine.get(k) != theirs.get(k)}
+    if diff:
+        raise CheckpointError(f"--init-from {str(path)!r}: its config differs from this run's as (checkpoint, run): {diff}")
+    if normalizers_to_json(source.normalizers) != normalizers_to_json(policy.normalizers):
+        raise CheckpointError(f"--init-from {str(path)!r}: its normalisers differ from those fitted on {policy.policy_type} "
+                              f"training data here; warm-start only on the same demonstrations")
+    policy.load_state_dict(source.state_dict())
+    info = read_checkpoint_info(path)
+    training = info.get("training") or {}
+    return {"path": str(path), **{k: training.get(k) for k in ("steps", "seconds", "samples_per_s", "torch_threads", "init_from")}}
+
+
 def _train_and_report(policy, batches, config, args: argparse.Namespace, meta: dict) -> int:
     from coursekit.train import train
 
-    result = train(policy, batches, config, out_dir=args.out, dataset_meta=meta)
+    prior = warm_start(policy, args.init_from) if getattr(args, "init_from", None) is not None else None
+    if prior is not None:
+        print(f"warm start from {args.init_from} ({prior['steps']} steps, {prior['seconds']} s)")
+    result = train(policy, batches, config, out_dir=args.out, dataset_meta=meta, init_from=prior)
     s = result.summary
     print(json.dumps({k: s[k] for k in ("steps", "seconds", "samples_per_s", "final_loss")}))
     print(f"wrote {args.out}")

@@ -8,7 +8,11 @@ checks that to 1e-5.
 
 Each sampler walks ``n`` timesteps ``t_i = i * (T // n)`` downwards (99, 98, ..., 0 for DDPM-100;
 90, 80, ..., 0 for DDIM-10); one step maps ``x_t`` to ``x_prev`` at ``prev = t - T // n`` and, past
-the last step, to abar = 1 (the clean sample).
+the last step, to abar = 1 (the clean sample). DDIM also takes diffusers' "trailing" spacing
+(Lin et al. 2024, "Common diffusion noise schedules and sample steps are flawed", Table 2):
+``t_i = round(T - i T / n) - 1``, i.e. 99, 89, ..., 9 for DDIM-10, so the walk starts at the
+last trained timestep, where x_T ~ N(0, I) really is the model's input distribution; "leading"
+starts at t = 90 and treats pure noise as x_90, which still holds a trace of the signal.
 
 ``ddim_step`` is exercise "ddim_step"; ``DDIMSampler(step_fn=...)`` takes a student's version.
 """
@@ -22,6 +26,7 @@ import torch
 from coursekit.diffusion.schedules import NoiseSchedule
 
 Scalar = float | torch.Tensor
+TIMESTEP_SPACINGS = ("leading", "trailing")
 EpsModel = Callable[[torch.Tensor, torch.Tensor, Any], torch.Tensor]
 
 
@@ -126,7 +131,7 @@ class _Sampler:
     """Shared timestep bookkeeping and the sampling loop; subclasses define ``step``."""
 
     def __init__(self, schedule: NoiseSchedule, num_inference_steps: int,
-                 clip_sample: bool, clip_sample_range: float) -> None:
+                 clip_sample: bool, clip_sample_range: float, timestep_spacing: str = "leading") -> None:
         T = schedule.num_train_timesteps
         if not isinstance(num_inference_steps, int) or not 1 <= num_inference_steps <= T:
             raise ValueError(f"num_inference_steps must be an int in [1, T={T}], got {num_inference_steps!r}")
@@ -136,9 +141,15 @@ class _Sampler:
         self.num_inference_steps = num_inference_steps
         self.clip_sample = clip_sample
         self.clip_sample_range = clip_sample_range
+        if timestep_spacing not in TIMESTEP_SPACINGS:
+            raise ValueError(f"timestep_spacing must be one of {TIMESTEP_SPACINGS}, got {timestep_spacing!r}")
+        self.timestep_spacing = timestep_spacing
         self.step_ratio = T // num_inference_steps
-        # diffusers "leading" spacing: t_i = i * (T // n), walked from the top down.
-        self.timesteps = (torch.arange(num_inference_steps) * self.step_ratio).flip(0)  # (n,) long
+        if timestep_spacing == "leading":  # diffusers "leading": t_i = i * (T // n), walked from the top down
+            self.timesteps = (torch.arange(num_inference_steps) * self.step_ratio).flip(0)  # (n,) long
+        else:  # "trailing": round(T - i T / n) - 1 for i = 0..n-1 (diffusers' formula, float steps)
+            ts = torch.round(torch.arange(T, 0, -T / num_inference_steps, dtype=torch.float64)) - 1
+            self.timesteps = ts.long()[:num_inference_steps]  # (n,) long
 
     def previous_timestep(self, t: int) -> int:
         """The timestep after t in the walk (negative past the last step, meaning abar = 1)."""
@@ -222,13 +233,14 @@ class DDIMSampler(_Sampler):
 
     ``step_fn`` (default ``ddim_step``) computes one update
     ``step_fn(eps, x_t, abar_t, abar_prev, eta=, noise=, clip_sample=, clip_sample_range=)``;
-    pass a student's implementation here.
+    pass a student's implementation here. ``timestep_spacing``: "leading" (90, 80, ..., 0 for
+    10 steps; Diffusion Policy's setting) or "trailing" (99, 89, ..., 9); see the module docstring.
     """
 
     def __init__(self, schedule: NoiseSchedule, num_inference_steps: int = 10, eta: float = 0.0,
                  clip_sample: bool = True, clip_sample_range: float = 1.0,
-                 step_fn: Callable[..., torch.Tensor] | None = None) -> None:
-        super().__init__(schedule, num_inference_steps, clip_sample, clip_sample_range)
+                 step_fn: Callable[..., torch.Tensor] | None = None, timestep_spacing: str = "leading") -> None:
+        super().__init__(schedule, num_inference_steps, clip_sample, clip_sample_range, timestep_spacing)
         if not eta >= 0.0:
             raise ValueError(f"eta must be >= 0, got {eta!r}")
         self.eta = float(eta)

@@ -12,7 +12,12 @@ the paper's simulation results) or DDIM (10 steps by default: a CPU needs it), t
 
 Departures from the reference code, on purpose: no observation inpainting / local conditioning
 (the paper's best state results use global FiLM conditioning, as here); DDIM is the default
-sampler for speed (``sampler="ddpm"`` reproduces the paper's evaluation setting).
+sampler for speed (``sampler="ddpm"`` reproduces the paper's evaluation setting), and it walks
+diffusers' "trailing" timesteps (99, 89, ..., 9) rather than the reference code's "leading" ones
+(90, 80, ..., 0): starting at the last trained step, pure noise is what the network saw in
+training (Lin et al. 2024). Chosen on validation seeds 200000-200099, never on the protocol's
+held-out seeds: the 20-minute CPU model scored 0.828 trailing vs 0.782 leading there (100
+episodes each, same model). ``ddim_timestep_spacing="leading"`` restores the original.
 """
 
 from __future__ import annotations
@@ -24,7 +29,7 @@ from typing import Any
 import torch
 
 from coursekit.diffusion.loss import diffusion_loss, epsilon_loss
-from coursekit.diffusion.samplers import DDIMSampler, DDPMSampler
+from coursekit.diffusion.samplers import TIMESTEP_SPACINGS, DDIMSampler, DDPMSampler
 from coursekit.diffusion.schedules import NoiseSchedule
 from coursekit.policies.base import Normalizer
 from coursekit.policies.unet_chunk import UNetChunkConfig, UNetChunkPolicy
@@ -48,6 +53,8 @@ class DiffusionPolicyConfig(UNetChunkConfig):
     """Denoising steps of the default sampler (DDPM uses T when sampler='ddpm' and this is left at 10)."""
     ddim_eta: float = 0.0
     """DDIM stochasticity: 0 = deterministic given a_T (Song et al. 2021, eq. 16)."""
+    ddim_timestep_spacing: str = "trailing"
+    """DDIM timesteps: 'trailing' (99, 89, ..., 9 for 10 steps) or 'leading' (90, 80, ..., 0; the paper's code)."""
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -60,6 +67,8 @@ class DiffusionPolicyConfig(UNetChunkConfig):
         if not isinstance(self.num_inference_steps, int) or not 1 <= self.num_inference_steps <= self.num_train_timesteps:
             raise ValueError(f"num_inference_steps must be an int in [1, T={self.num_train_timesteps}], "
                              f"got {self.num_inference_steps!r}")
+        if self.ddim_timestep_spacing not in TIMESTEP_SPACINGS:
+            raise ValueError(f"ddim_timestep_spacing must be one of {TIMESTEP_SPACINGS}, got {self.ddim_timestep_spacing!r}")
         if not 0.0 <= float(self.ddim_eta) <= 1.0:
             raise ValueError(f"ddim_eta must be in [0, 1], got {self.ddim_eta!r}")
 
@@ -93,7 +102,7 @@ class DiffusionPolicy(UNetChunkPolicy):
         kind = sampler or c.sampler
         if kind == "ddim":
             return DDIMSampler(self.schedule, num_inference_steps or c.num_inference_steps, eta=c.ddim_eta,
-                               clip_sample=c.clip_sample)
+                               clip_sample=c.clip_sample, timestep_spacing=c.ddim_timestep_spacing)
         if kind == "ddpm":
             if num_inference_steps is None and sampler is None and c.sampler == "ddpm":
                 num_inference_steps = c.num_inference_steps
