@@ -208,3 +208,35 @@ def test_optimizer_is_adamw_with_the_papers_settings():
             m(x).square().mean().backward()
             opt.step()
     torch.testing.assert_close(a.weight, b.weight, rtol=1e-6, atol=1e-7)
+
+
+def test_cli_init_from_continues_from_the_checkpoint_weights(tmp_path, capsys):
+    """--init-from: the new run starts from the old weights (with lr ~0 they stay put) and records its history."""
+    from coursekit.checkpoint import load_checkpoint, read_checkpoint_info
+    from coursekit.cli import main
+
+    data = tmp_path / "demos.npz"
+    synthetic_pusht().save(data)
+    first, second = tmp_path / "first", tmp_path / "second"
+    common = ["--data", str(data), "--batch-size", "4", "--down-dims", "16,32", "--no-progress", "--warmup-steps", "0"]
+    assert main(["train", "--steps", "3", "--out", str(first), *common]) == 0
+    assert main(["train", "--steps", "2", "--lr", "1e-12", "--init-from", str(first), "--out", str(second), *common]) == 0
+    a, b = load_checkpoint(first, device="cpu").state_dict(), load_checkpoint(second, device="cpu").state_dict()
+    for name in a:
+        torch.testing.assert_close(b[name], a[name], atol=1e-6, rtol=0, msg=name)
+    prior = read_checkpoint_info(second)["training"]["init_from"]
+    assert prior["path"] == str(first) and prior["steps"] == 3
+    # A fresh run from the same seed is NOT the first checkpoint: the weights really came from --init-from.
+    fresh = tmp_path / "fresh"
+    assert main(["train", "--steps", "2", "--lr", "1e-12", "--out", str(fresh), *common]) == 0
+    c = load_checkpoint(fresh, device="cpu").state_dict()
+    assert any((c[n] - a[n]).abs().max() > 1e-4 for n in a)
+
+    # Mismatches are refused with the difference named, and nothing is written.
+    capsys.readouterr()
+    bad = tmp_path / "bad"
+    assert main(["train", "--steps", "1", "--init-from", str(first), "--out", str(bad),
+                 *[x if x != "16,32" else "16,48" for x in common]]) == 2
+    assert "unet" in capsys.readouterr().err and not bad.exists()
+    assert main(["train", "--steps", "1", "--policy", "regression", "--init-from", str(first), "--out", str(bad), *common]) == 2
+    assert "'diffusion' policy, expected 'regression'" in capsys.readouterr().err and not bad.exists()
