@@ -168,6 +168,10 @@ def test_cli_train_then_eval_smoke(tmp_path, capsys):
                  "--json", str(summary_file)]) == 0
     summary = json.loads(summary_file.read_text())
     assert summary["episodes"] == 2 and 0.0 <= summary["score"] <= 1.0 and summary["num_inference_steps"] == 2
+    assert summary["first_timestep"] == 50  # leading spacing (the paper's): 50, 0
+    assert main(["eval", str(out), "--episodes", "2", "--max-steps", "3", "--steps", "2", "--no-progress",
+                 "--ddim-spacing", "trailing", "--json", str(summary_file)]) == 0
+    assert json.loads(summary_file.read_text())["first_timestep"] == 99  # trailing: 99, 49
     assert main(["eval", str(tmp_path / "nope"), "--no-progress"]) == 2  # clear error, no traceback
     assert "not found" in capsys.readouterr().err
     assert not math.isnan(summary["ms_per_chunk"])
