@@ -20,6 +20,8 @@ pure noise really is the network's training input (Lin et al. 2024). On the 20-m
 it was no better, measured: 0.828 vs 0.782 (trailing vs leading) on 100 validation seeds from
 200000, but 0.723 vs 0.788 on the 50 protocol seeds from 100000 — differences of this size are
 evaluation noise (score stderr ~0.05 at 50 episodes), so the paper's choice stays the default.
+(Measured with ``coursekit eval CKPT --ddim-spacing {leading,trailing} [--episodes 100
+--seed-start 200000]`` on the checkpoint of ``benchmarks.bench_diffusion_policy --only score``.)
 """
 
 from __future__ import annotations
