@@ -235,6 +235,10 @@ def main(argv: list[str] | None = None) -> None:
                 f"torch thread(s); evaluated on {torch.get_num_threads()}; DDIM-10 walks down from t = "
                 f"{scores['diffusion DDIM-10'].info.get('first_timestep')}; " + note)
         dp, dp_ddpm = scores["diffusion DDIM-10"], scores["diffusion DDPM-100"]
+        rec(SECTION, f"training throughput over the {args.minutes:g}-min score run (batch {args.batch_size})",
+            round(dp_sum["samples_per_s"]), "samples/s", cmd,
+            note=f"whole run incl. batching, EMA and warm-up: {dp_sum['steps']} steps in {dp_sum['seconds']:.0f} s on "
+                 f"{dp_sum.get('torch_threads')} torch thread(s)")
         rec(SECTION, f"score after {args.minutes:g} min, DDIM-10", round(dp.score, 3), "", cmd, target=">= 0.80",
             note=f"success {dp.success_rate:.0%}; stderr {dp.summary()['score_stderr']:.3f}; {note}")
         rec(SECTION, f"score after {args.minutes:g} min, DDPM-100", round(dp_ddpm.score, 3), "", cmd,
