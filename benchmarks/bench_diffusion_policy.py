@@ -159,7 +159,7 @@ def main(argv: list[str] | None = None) -> None:
     load = os.getloadavg()[0]
     dataset = load_or_collect(args.out / f"pusht_{args.demos}ep_seed0.npz", args.demos, 0)
     rec = (lambda *a, **k: None) if args.no_record else record  # noqa: E731
-    machine = f"{args.threads} torch threads, load average {load:.1f} at start"
+    machine = f"this command ran with {args.threads} torch thread(s), load average {load:.1f} at its start"
 
     if args.only == "shipped":
         evaluate_shipped(args, rec)
