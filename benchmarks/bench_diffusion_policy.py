@@ -14,7 +14,12 @@ Run on a QUIET machine (the numbers are wall-clock): ``.venv/bin/python -m bench
   ``coursekit/checkpoints/pusht_{diffusion,regression}_state`` and evaluates those copies, so the
   recorded scores are exactly what notebook 05 reproduces.
   ``--parallel`` trains both at once with one thread each (about 25 minutes in all, but each
-  policy then gets one core, not two).
+  policy then gets one core, not two). ``--regression-steps match`` trains the baseline for
+  exactly as many optimiser steps as the diffusion checkpoint in ``--out`` (the fair comparison
+  when the two ran on different thread counts); with ``--reuse`` the DP run is only re-scored.
+- ``shipped``: scores ``coursekit/checkpoints/pusht_{diffusion,regression}_state`` by notebook
+  05's protocol (DDIM-10, plus DDPM-100 for DP); ``tests/test_shipped_checkpoints.py`` re-checks
+  those rows through ``coursekit eval``.
 - Recipe: ``--recipe cpu`` (default: lr 5e-4, batch 128, a deliberate departure for a 20-minute
   budget, see ``TrainConfig.recipe``) or ``--recipe paper`` (lr 1e-4, batch 256). Other variants:
   ``--down-dims 48,96,192``, ``--batch-size``, ``--lr``.
