@@ -193,13 +193,9 @@ def _maybe_ship(out: Path, name: str, args: argparse.Namespace) -> tuple[Path, s
     that copy (so the recorded figure is exactly what notebook 09 and `coursekit eval` load)."""
     if not args.ship:
         return out, ""
-    from coursekit.checkpoint import load_checkpoint, read_checkpoint_info, save_checkpoint
+    from coursekit.checkpoint import copy_checkpoint_half
 
-    info = read_checkpoint_info(out)
-    dest = SHIPPED_DIR / name
-    save_checkpoint(load_checkpoint(out, device="cpu"), dest, half=True, dataset_meta=info.get("dataset"),
-                    training=info.get("training"))
-    return dest, f"; evaluated: the shipped float16 copy coursekit/checkpoints/{name}"
+    return copy_checkpoint_half(out, SHIPPED_DIR / name), f"; evaluated: the shipped float16 copy coursekit/checkpoints/{name}"
 
 
 def bench_dp_cube(args: argparse.Namespace) -> None:
@@ -294,6 +290,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--no-record", action="store_true", help="print only, do not write results.json")
     parser.add_argument("--no-progress", action="store_true", help="hide progress bars")
     args = parser.parse_args(argv)
+    if args.quick and args.ship:
+        parser.error("--ship with --quick would ship a smoke-run model over coursekit/checkpoints/; drop one of them")
     if args.quick:
         args.minutes = min(args.minutes, 0.5)
         args.repeats = min(args.repeats, 3)

@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import multiprocessing
 import os
 import sys
@@ -46,7 +45,7 @@ from pathlib import Path
 import torch
 
 from benchmarks.results import record
-from coursekit.checkpoint import load_checkpoint, save_checkpoint
+from coursekit.checkpoint import copy_checkpoint_half, load_checkpoint, read_checkpoint_info
 from coursekit.data.episodes import EpisodeDataset
 from coursekit.evaluate import evaluate_pusht
 from coursekit.nn.unet1d import UNet1DConfig
@@ -80,10 +79,15 @@ def throughput(dataset: EpisodeDataset, threads: int, seconds: float, batch_size
     return float(result.summary["samples_per_s"])
 
 
+def run_dir(kind: str, args: argparse.Namespace) -> Path:
+    """Where ``kind``'s checkpoint for this budget/U-Net/batch/LR lives under --out (--reuse finds it there)."""
+    return args.out / f"{kind}_{args.minutes:g}min_{args.down_dims.replace(',', '-')}_b{args.batch_size}_lr{args.lr:g}"
+
+
 def train_policy(kind: str, dataset: EpisodeDataset, args: argparse.Namespace, out: Path) -> dict:
     """Train ``kind`` for the budget into ``out`` (unless it exists and --reuse); returns the training summary."""
     if args.reuse and (out / "config.json").is_file():
-        return json.loads((out / "config.json").read_text())["training"]
+        return read_checkpoint_info(out)["training"]
     unet = UNet1DConfig(down_dims=tuple(int(v) for v in args.down_dims.split(",")))
     policy, batches = make_pusht_policy(kind, dataset, seed=args.seed, device="cpu", batch_size=args.batch_size, unet=unet)
     meta = {**dataset.meta, "n_steps": dataset.n_steps}
@@ -105,7 +109,7 @@ def train_policy(kind: str, dataset: EpisodeDataset, args: argparse.Namespace, o
 def evaluate_shipped(args: argparse.Namespace, rec) -> None:
     """Score the shipped checkpoints by the protocol notebook 05 runs (DDIM-10 default sampler), plus DDPM-100."""
     for kind in ("diffusion", "regression"):
-        info = json.loads((SHIP[kind] / "config.json").read_text())
+        info = read_checkpoint_info(SHIP[kind])
         policy = load_checkpoint(SHIP[kind], device="cpu")
         t = info["training"]
         prior = t.get("init_from") or {}
@@ -185,14 +189,13 @@ def main(argv: list[str] | None = None) -> None:
     budgets = [args.minutes if k == "diffusion" else (args.regression_minutes or args.minutes) for k in kinds]
     budget = max(budgets) if args.parallel else sum(budgets)
     print(f"training {kinds} for {budget:g} min in all, plus evaluation (DDPM-100 on {args.episodes} episodes: ~3 min)")
-    outs = {k: args.out / f"{k}_{args.minutes:g}min_{args.down_dims.replace(',', '-')}_b{args.batch_size}_lr{args.lr:g}"
-            for k in kinds}
+    outs = {k: run_dir(k, args) for k in kinds}
     if args.regression_steps == "match":
-        dp_dir = args.out / f"diffusion_{args.minutes:g}min_{args.down_dims.replace(',', '-')}_b{args.batch_size}_lr{args.lr:g}"
+        dp_dir = run_dir("diffusion", args)
         if not (dp_dir / "config.json").is_file():
             raise FileNotFoundError(f"--regression-steps match needs the diffusion checkpoint {str(dp_dir)!r}; "
                                     f"train it first (--policies diffusion)")
-        args.regression_steps = int(json.loads((dp_dir / "config.json").read_text())["training"]["steps"])
+        args.regression_steps = int(read_checkpoint_info(dp_dir)["training"]["steps"])
         print(f"regression baseline: {args.regression_steps} optimiser steps, as many as {dp_dir.name}")
     elif args.regression_steps is not None:
         args.regression_steps = int(args.regression_steps)
@@ -207,7 +210,7 @@ def main(argv: list[str] | None = None) -> None:
         side.join()
         if side.exitcode != 0:
             raise RuntimeError(f"the regression training process failed (exit code {side.exitcode})")
-        summaries["regression"] = json.loads((outs["regression"] / "config.json").read_text())["training"]
+        summaries["regression"] = read_checkpoint_info(outs["regression"])["training"]
         machine = f"trained in parallel, 1 torch thread each; load average {load:.1f} at start"
     scores = {}
     for kind in kinds:
@@ -215,17 +218,16 @@ def main(argv: list[str] | None = None) -> None:
         summary = summaries.get(kind) or train_policy(kind, dataset, args, out)
         summaries[kind] = summary
         if args.ship:  # ship float16 weights (half the size) and evaluate exactly what is shipped
-            save_checkpoint(load_checkpoint(out, device="cpu"), SHIP[kind], half=True,
-                            dataset_meta=json.loads((out / "config.json").read_text())["dataset"], training=summary)
-            out = SHIP[kind]
+            out = copy_checkpoint_half(out, SHIP[kind])
         policy = load_checkpoint(out, device="cpu")
+        dataset_meta = read_checkpoint_info(out)["dataset"]
         if args.ddim_spacing is not None and kind == "diffusion":
             policy.config = dataclasses.replace(policy.config, ddim_timestep_spacing=args.ddim_spacing)
         samplers = [("ddim", 10), ("ddpm", 100)] if kind == "diffusion" else [(None, None)]
         for sampler, steps in samplers:
             t0 = time.perf_counter()
             r = evaluate_pusht(policy, n_episodes=args.episodes, sampler=sampler, num_inference_steps=steps,
-                               dataset_meta=json.loads((out / "config.json").read_text())["dataset"])
+                               dataset_meta=dataset_meta)
             label = f"{kind} {sampler.upper()}-{steps}" if sampler else kind
             scores[label] = r
             print(f"{label}: score {r.score:.3f} +- {r.summary()['score_stderr']:.3f}, success {r.success_rate:.0%}, "
@@ -253,17 +255,16 @@ def main(argv: list[str] | None = None) -> None:
     if "regression" in kinds:
         reg = scores["regression"]
         reg_min = args.regression_minutes or args.minutes
-        reg_summary = summaries.get("regression") or json.loads((outs["regression"] / "config.json").read_text())["training"]
+        reg_summary = summaries["regression"]
         reg_budget = (f"{reg_summary['steps']} steps (step-matched, {reg_summary['seconds'] / 60:.0f} min on "
                       f"{reg_summary.get('torch_threads')} thread(s))" if args.regression_steps else f"{reg_min:g} min")
         rec(SECTION, "regression baseline score (same budget as the 20-min DP run)", round(reg.score, 3), "", cmd,
             note=f"success {reg.success_rate:.0%}; same backbone and data; trained {reg_budget}; {note}")
-        if "diffusion" in kinds or args.reuse:
-            dp_scores = {k: v for k, v in scores.items() if k.startswith("diffusion")}
-            if dp_scores:
-                best = min(dp_scores.values(), key=lambda r: r.score)  # the weaker sampler: a conservative gap
-                rec(SECTION, "Diffusion Policy minus regression baseline (weaker DP sampler)", round(best.score - reg.score, 3),
-                    "", cmd, target=">= 0.15", note=f"regression trained {reg_budget}; {note}")
+        dp_scores = [v for k, v in scores.items() if k.startswith("diffusion")]
+        if dp_scores:
+            weaker = min(dp_scores, key=lambda r: r.score)  # the weaker sampler: a conservative gap
+            rec(SECTION, "Diffusion Policy minus regression baseline (weaker DP sampler)", round(weaker.score - reg.score, 3),
+                "", cmd, target=">= 0.15", note=f"regression trained {reg_budget}; {note}")
 
 
 if __name__ == "__main__":

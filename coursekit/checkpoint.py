@@ -109,6 +109,14 @@ def save_checkpoint(policy: Any, path: str | os.PathLike, *, dataset_meta: dict[
     return path
 
 
+def copy_checkpoint_half(src: str | os.PathLike, dest: str | os.PathLike) -> Path:
+    """Re-save the checkpoint ``src`` at ``dest`` with float16 weights (how checkpoints are shipped in
+    the repository), keeping its dataset metadata and training summary; returns ``dest``."""
+    info = read_checkpoint_info(src)
+    return save_checkpoint(load_checkpoint(src, device="cpu"), dest, half=True, dataset_meta=info.get("dataset"),
+                           training=info.get("training"))
+
+
 def read_checkpoint_info(path: str | os.PathLike) -> dict[str, Any]:
     """The parsed, format-checked config.json of a checkpoint directory (no weights loaded)."""
     path = Path(path)

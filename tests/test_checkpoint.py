@@ -152,3 +152,15 @@ def test_refuses_missing_weights_and_foreign_json(saved):
     (path / "config.json").write_text(json.dumps({"format": "something-else"}))
     with pytest.raises(CheckpointError, match="not a coursekit checkpoint"):
         load_checkpoint(path)
+
+
+def test_copy_checkpoint_half_keeps_provenance(saved, tmp_path):
+    policy, path = saved
+    from coursekit.checkpoint import copy_checkpoint_half
+
+    dest = copy_checkpoint_half(path, tmp_path / "shipped")
+    src_info, info = read_checkpoint_info(path), read_checkpoint_info(dest)
+    assert info["weights"]["dtype"] == "float16"
+    assert (info["dataset"], info["training"], info["config"]) == (src_info["dataset"], src_info["training"], src_info["config"])
+    for (name, a), b in zip(policy.state_dict().items(), load_checkpoint(dest, device="cpu").state_dict().values()):
+        torch.testing.assert_close(b, a.half().float(), msg=name)
