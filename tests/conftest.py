@@ -2,7 +2,15 @@
 
 from __future__ import annotations
 
+import os
+
 import pytest
+
+# MuJoCo picks its OpenGL backend once, when first imported. A test module that runs
+# `pytest.importorskip("mujoco")` before anything imports coursekit.envs.aloha (which sets this
+# default itself) would otherwise lock in GLFW, which needs a display, and every later offscreen
+# render fails. Same default as coursekit.envs.aloha and .ci/run, so plain `make test` works too.
+os.environ.setdefault("MUJOCO_GL", "egl")
 
 
 @pytest.fixture
