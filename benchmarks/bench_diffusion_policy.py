@@ -59,13 +59,13 @@ SHIP = {"diffusion": ROOT / "coursekit" / "checkpoints" / "pusht_diffusion_state
         "regression": ROOT / "coursekit" / "checkpoints" / "pusht_regression_state"}
 
 
-def load_or_collect(path: Path, n_episodes: int, seed: int) -> EpisodeDataset:
+def load_or_collect(path: Path, n_episodes: int, seed: int, action_noise: tuple[float, ...] = (0.0,)) -> EpisodeDataset:
     """The demonstrations file, collected with the PushT expert if it does not exist yet."""
     if path.is_file():
         return EpisodeDataset.load(path)
     from coursekit.experts.pusht_planner import collect_dataset
 
-    dataset = collect_dataset(n_episodes, seed)
+    dataset = collect_dataset(n_episodes, seed, action_noise=action_noise)
     dataset.save(path)
     return dataset
 
@@ -81,7 +81,15 @@ def throughput(dataset: EpisodeDataset, threads: int, seconds: float, batch_size
 
 def run_dir(kind: str, args: argparse.Namespace) -> Path:
     """Where ``kind``'s checkpoint for this budget/U-Net/batch/LR lives under --out (--reuse finds it there)."""
-    return args.out / f"{kind}_{args.minutes:g}min_{args.down_dims.replace(',', '-')}_b{args.batch_size}_lr{args.lr:g}"
+    return args.out / (f"{kind}_{args.minutes:g}min_{args.down_dims.replace(',', '-')}_b{args.batch_size}_lr{args.lr:g}"
+                       + data_tag(args))
+
+
+def data_tag(args: argparse.Namespace) -> str:
+    """Name suffix for non-default demonstrations / observation features ('' for the defaults)."""
+    noise = "" if set(args.action_noise) == {0.0} else "_noise" + "-".join(f"{v:g}" for v in args.action_noise)
+    feats = "" if args.features == "pusht_state" else "_" + args.features.removeprefix("pusht_")
+    return noise + feats
 
 
 def train_policy(kind: str, dataset: EpisodeDataset, args: argparse.Namespace, out: Path) -> dict:
@@ -89,7 +97,8 @@ def train_policy(kind: str, dataset: EpisodeDataset, args: argparse.Namespace, o
     if args.reuse and (out / "config.json").is_file():
         return read_checkpoint_info(out)["training"]
     unet = UNet1DConfig(down_dims=tuple(int(v) for v in args.down_dims.split(",")))
-    policy, batches = make_pusht_policy(kind, dataset, seed=args.seed, device="cpu", batch_size=args.batch_size, unet=unet)
+    policy, batches = make_pusht_policy(kind, dataset, features=args.features, seed=args.seed, device="cpu",
+                                        batch_size=args.batch_size, unet=unet)
     meta = {**dataset.meta, "n_steps": dataset.n_steps}
     meta.pop("route_choices", None)  # bulky; the dataset file keeps it
     minutes = args.minutes if kind == "diffusion" or args.regression_minutes is None else args.regression_minutes
@@ -138,6 +147,11 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--threads", type=int, default=2, help="torch threads for training and evaluation (default 2)")
     parser.add_argument("--episodes", type=int, default=50, help="evaluation episodes (default 50)")
     parser.add_argument("--demos", type=int, default=200, help="demonstrations (default 200, seeds 0..199)")
+    parser.add_argument("--action-noise", default="0",
+                        help="DART execution noise of the expert demos in px, one level or a comma list cycled over "
+                             "episodes (default 0 = clean; e.g. 0,10 alternates clean and noisy)")
+    parser.add_argument("--features", choices=["pusht_state", "pusht_keypoints"], default="pusht_state",
+                        help="observation features (default pusht_state; pusht_keypoints = the paper's low-dim)")
     parser.add_argument("--regression-minutes", type=float, default=None,
                         help="training budget of the regression baseline (default: --minutes)")
     parser.add_argument("--regression-steps", default=None,
@@ -160,13 +174,15 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--ship", action="store_true", help="copy the trained checkpoints to coursekit/checkpoints/")
     parser.add_argument("--no-record", action="store_true", help="print only, do not write results.json")
     args = parser.parse_args(argv)
+    args.action_noise = tuple(float(v) for v in str(args.action_noise).split(","))
     base = TrainConfig.recipe(args.recipe, max_steps=1)
     args.lr = args.lr if args.lr is not None else base.lr
     args.batch_size = args.batch_size if args.batch_size is not None else base.batch_size
     args.out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(args.threads)
     load = os.getloadavg()[0]
-    dataset = load_or_collect(args.out / f"pusht_{args.demos}ep_seed0.npz", args.demos, 0)
+    noise_tag = "" if set(args.action_noise) == {0.0} else "_noise" + "-".join(f"{v:g}" for v in args.action_noise)
+    dataset = load_or_collect(args.out / f"pusht_{args.demos}ep_seed0{noise_tag}.npz", args.demos, 0, args.action_noise)
     rec = (lambda *a, **k: None) if args.no_record else record  # noqa: E731
     machine = f"this command ran with {args.threads} torch thread(s), load average {load:.1f} at its start"
 
@@ -233,7 +249,9 @@ def main(argv: list[str] | None = None) -> None:
             print(f"{label}: score {r.score:.3f} +- {r.summary()['score_stderr']:.3f}, success {r.success_rate:.0%}, "
                   f"{summary['steps']} steps in {summary['seconds']:.0f} s, eval {time.perf_counter() - t0:.0f} s")
 
-    note = (f"{args.demos} expert demos, {args.minutes:g} min training (recipe {args.recipe}: U-Net {args.down_dims}, "
+    demos = f"{args.demos} expert demos" + ("" if not noise_tag else
+                                            f" (DART execution noise {'/'.join(f'{v:g}' for v in args.action_noise)} px, cycled)")
+    note = (f"{demos}, {args.features} features, {args.minutes:g} min training (recipe {args.recipe}: U-Net {args.down_dims}, "
             f"batch {args.batch_size}, lr {args.lr:g}), {args.episodes} held-out seeds from 100000, 300 steps, {machine}")
     cmd = " ".join([COMMAND, *(sys.argv[1:] if argv is None else argv)])
     if "diffusion" in kinds:

@@ -92,6 +92,22 @@ def test_collect_rejects_bad_arguments():
         collect_dataset(0, seed=0)
     with pytest.raises(ValueError, match="-1"):
         collect_dataset(2, seed=-1)
+    for bad in (-2.0, (), (0.0, float("nan"))):
+        with pytest.raises(ValueError, match="action_noise"):
+            collect_dataset(2, seed=0, action_noise=bad)
+
+
+def test_collect_cycles_dart_noise_levels():
+    """``action_noise=(0, 10)`` alternates clean and noisy episodes; the clean ones are exactly
+    the default demonstrations of the same seeds."""
+    from coursekit.experts.pusht_planner import collect_dataset
+
+    mixed = collect_dataset(2, seed=5, progress=False, action_noise=(0.0, 10.0))
+    clean = collect_dataset(1, seed=5, progress=False)
+    assert mixed.meta["action_noise"] == [0.0, 10.0] and mixed.meta["episode_noise"] == [0.0, 10.0]
+    assert mixed.meta["episode_seeds"] == [5, 6] and clean.meta["episode_noise"] == [0.0]
+    for key in ("state", "action"):
+        assert np.array_equal(mixed.episode(0)[key], clean.episode(0)[key])
 
 
 def test_collect_command_writes_a_dataset(tmp_path):
@@ -104,3 +120,16 @@ def test_collect_command_writes_a_dataset(tmp_path):
     loaded = EpisodeDataset.load(out)
     assert loaded.n_episodes == 3 and loaded.meta["seed"] == 0
     assert str(out) in result.stdout
+
+
+def test_collect_command_dart_noise(tmp_path):
+    exe = Path(sys.executable).with_name("coursekit")
+    cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "coursekit.cli"]
+    out = tmp_path / "noisy.npz"
+    result = subprocess.run([*cmd, "collect", "pusht", "--episodes", "2", "--action-noise", "0,10", "--out", str(out),
+                             "--no-progress"], capture_output=True, text=True, timeout=240)
+    assert result.returncode == 0, result.stderr
+    assert EpisodeDataset.load(out).meta["episode_noise"] == [0.0, 10.0]
+    bad = subprocess.run([*cmd, "collect", "pusht", "--episodes", "2", "--action-noise", "ten", "--out",
+                          str(tmp_path / "bad.npz"), "--no-progress"], capture_output=True, text=True, timeout=240)
+    assert bad.returncode != 0 and "ten" in bad.stderr and not (tmp_path / "bad.npz").exists()

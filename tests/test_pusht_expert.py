@@ -229,3 +229,40 @@ def test_two_ways_figure(two_way_runs):
     summary = plot_choice_summary([r.route_choices for r in two_way_runs] + [[]])
     heights = [p.get_height() for p in summary.axes[0].patches]
     assert sum(heights) == 9 and heights[0] == 1
+
+
+def test_dart_noise_executes_noisy_targets_and_records_the_expert(expert, env):
+    """DART (Laskey et al. 2017): the env runs target + N(0, sigma^2) per axis, the record keeps
+    the clean target. Replaying the recorded targets plus the same seeded noise stream in a fresh
+    env must reproduce every recorded state exactly; without the noise it must not."""
+    from coursekit.envs.pusht import PushTEnv
+    from coursekit.experts.pusht_planner import NOISE_STREAM
+
+    seed, sigma = 11, 10.0
+    rec = expert.run_episode(env, seed, action_noise=sigma)
+    assert rec.success_step is not None
+    clean = expert.run_episode(env, seed)
+    assert len(rec.states) != len(clean.states) or not np.array_equal(rec.states, clean.states)
+    for with_noise in (True, False):
+        replay = PushTEnv(obs_type="state", max_episode_steps=1000)
+        replay.reset(seed=seed)
+        rng = np.random.default_rng([NOISE_STREAM, seed])
+        states = []
+        for action in rec.actions:
+            states.append(replay.get_state()[:5].copy())
+            executed = np.clip(action + rng.normal(0.0, sigma, size=2), 0.0, geo.WORLD_SIZE) if with_noise else action
+            replay.step(executed)
+        if with_noise:
+            np.testing.assert_array_equal(np.stack(states), rec.states)
+        else:
+            assert np.abs(np.stack(states) - rec.states).max() > 1.0
+    # The recorded targets are the planner's: smooth, even though the pusher was shaken.
+    assert np.linalg.norm(np.diff(rec.actions, axis=0), axis=1).max() <= expert.config.travel_speed + 1e-6
+    again = expert.run_episode(env, seed, action_noise=sigma)
+    assert np.array_equal(again.states, rec.states) and np.array_equal(again.actions, rec.actions)
+
+
+@pytest.mark.parametrize("bad", [-1.0, float("nan"), float("inf")])
+def test_dart_noise_rejects_bad_levels(expert, env, bad):
+    with pytest.raises(ValueError, match="action_noise"):
+        expert.run_episode(env, 0, action_noise=bad)

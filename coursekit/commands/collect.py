@@ -22,7 +22,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("task", choices=sorted(TASKS), help="which task's scripted expert to run")
     parser.add_argument("--episodes", type=int, default=None, help="number of demonstrations (default: 200 PushT, 50 ALOHA)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the first episode; episode i uses seed + i")
-    parser.add_argument("--out", type=Path, default=None, help="output .npz (default: outputs/data/<task>_<episodes>ep_seed<seed>.npz)")
+    parser.add_argument("--out", type=Path, default=None, help="output .npz (default: outputs/data/<task>_<episodes>ep_seed<seed>[_noise<levels>].npz)")
+    parser.add_argument("--action-noise", default=None,
+                        help="pusht only: DART execution noise in px (the env runs the expert's target plus Gaussian "
+                             "noise, the file keeps the clean target); a comma list is cycled over episodes, "
+                             "e.g. 0,10 alternates clean and noisy demonstrations (default 0)")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
@@ -30,11 +34,21 @@ def run(args: argparse.Namespace) -> int:
     episodes = args.episodes if args.episodes is not None else DEFAULT_EPISODES[args.task]
     if episodes < 1:
         raise ValueError(f"--episodes must be at least 1, got {episodes}")
-    out = args.out or Path("outputs/data") / f"{args.task}_{episodes}ep_seed{args.seed}.npz"
     module_name, func_name = TASKS[args.task].split(":")
     collect = getattr(importlib.import_module(module_name), func_name)
+    extra = {}
+    if args.action_noise is not None:
+        if args.task != "pusht":
+            raise ValueError(f"--action-noise is for the pusht expert only, not {args.task!r}")
+        try:
+            extra["action_noise"] = tuple(float(v) for v in str(args.action_noise).split(","))
+        except ValueError:
+            raise ValueError(f"--action-noise must be a number or a comma list of numbers (px), "
+                             f"got {args.action_noise!r}") from None
+    tag = "" if set(extra.get("action_noise", (0.0,))) == {0.0} else "_noise" + "-".join(f"{v:g}" for v in extra["action_noise"])
+    out = args.out or Path("outputs/data") / f"{args.task}_{episodes}ep_seed{args.seed}{tag}.npz"
     start = time.perf_counter()
-    dataset = collect(episodes, args.seed, progress=not args.no_progress)
+    dataset = collect(episodes, args.seed, progress=not args.no_progress, **extra)
     dataset.save(out)
     seconds = time.perf_counter() - start
     print(f"wrote {out}: {dataset.n_episodes} episodes, {dataset.n_steps} steps in {seconds:.1f} s")

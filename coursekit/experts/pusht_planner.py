@@ -28,6 +28,7 @@ end, the way a hand would. Everything is deterministic given the reset seed and 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from typing import TYPE_CHECKING
 
@@ -48,6 +49,8 @@ EXPERT_NAME = "coursekit.experts.pusht_planner"
 EXPERT_VERSION = "1"
 COIN_STREAM = 0xC01
 """Mixed into the coin's seed so that the coin never shares a random stream with the reset."""
+NOISE_STREAM = 0xDA27
+"""Mixed into the execution-noise seed (``action_noise``) for the same reason."""
 
 TWO_WAY_START = (100.0, 256.0, 300.0, 256.0, 3 * math.pi / 4)
 """A reset state [ax, ay, bx, by, angle] (``reset_to_state``, legacy order) where the T stands
@@ -204,16 +207,28 @@ class PushTExpert:
     # One episode
     # ----------------------------------------------------------------------------------------
     def run_episode(self, env, seed: int | None = None, coin_seed: int | None = None,
-                    reset_state=None) -> EpisodeRecord:
+                    reset_state=None, action_noise: float = 0.0) -> EpisodeRecord:
         """Reset ``env`` (a ``PushTEnv``) with ``seed`` (or to ``reset_state`` (5,)) and solve it.
 
         ``coin_seed`` (default: ``seed``) seeds the coin that picks between equally good sides.
+        ``action_noise`` > 0: DART-style demonstrations (Laskey et al. 2017): the env executes
+        the expert's target plus Gaussian noise of this standard deviation (px, per axis, per
+        step, seeded by ``coin_seed``) while the record keeps the expert's clean target. The
+        expert re-plans from the real state after every push, so the episode shows it
+        correcting the drift: the recovery data that clean demonstrations lack.
         """
+        if not (math.isfinite(action_noise) and action_noise >= 0):
+            raise ValueError(f"action_noise must be a finite standard deviation >= 0 (px), got {action_noise!r}")
         cfg, search = self.config, self.search
         options = None if reset_state is None else {"reset_to_state": np.asarray(reset_state, dtype=np.float64)}
         _, info = env.reset(seed=seed, options=options)
-        coin = Coin(coin_seed if coin_seed is not None else (seed if seed is not None else 0))
-        ep = _Recorder(env, info["coverage"], cfg.max_steps, search.rests_successfully)
+        stream_seed = coin_seed if coin_seed is not None else (seed if seed is not None else 0)
+        coin = Coin(stream_seed)
+        noise = None
+        if action_noise > 0:
+            rng = np.random.default_rng([NOISE_STREAM, int(stream_seed)])
+            noise = lambda: rng.normal(0.0, action_noise, size=2)  # noqa: E731  (px, per axis)
+        ep = _Recorder(env, info["coverage"], cfg.max_steps, search.rests_successfully, noise)
         self._settle(env, ep)
         choices: list[dict] = []
         bumps = 0
@@ -278,11 +293,12 @@ class _Recorder:
     """Steps the real env and records (state before the action, action, coverage, phase).
 
     The episode is done once the coverage has passed 0.95 at a moment when ``rests_well(state)``
-    says it will stay in place at rest (or after ``max_steps``).
+    says it will stay in place at rest (or after ``max_steps``). ``noise()`` (optional, (2,) px)
+    is added to the executed target only; the recorded action stays the expert's.
     """
 
-    def __init__(self, env, coverage: float, max_steps: int, rests_well):
-        self.env, self.max_steps, self.rests_well = env, max_steps, rests_well
+    def __init__(self, env, coverage: float, max_steps: int, rests_well, noise=None):
+        self.env, self.max_steps, self.rests_well, self.noise = env, max_steps, rests_well, noise
         self.coverage = float(coverage)
         self.rows: list[tuple[np.ndarray, np.ndarray, float, int]] = []
         self.success_step: int | None = None
@@ -302,7 +318,8 @@ class _Recorder:
         state = self.env.get_state()[:5]
         action = np.clip(np.asarray(target, dtype=np.float64), 0.0, geo.WORLD_SIZE)
         self.rows.append((state, action, self.coverage, phase))
-        _, _, _, _, info = self.env.step(action)
+        executed = action if self.noise is None else np.clip(action + self.noise(), 0.0, geo.WORLD_SIZE)
+        _, _, _, _, info = self.env.step(executed)
         self.coverage = float(info["coverage"])
         if info["is_success"]:
             if self.success_step is None:
@@ -329,10 +346,14 @@ class _Recorder:
 # A dataset of demonstrations
 # --------------------------------------------------------------------------------------------
 def collect_dataset(n_episodes: int, seed: int, progress: bool = True,
-                    config: ExpertConfig | None = None) -> EpisodeDataset:
+                    config: ExpertConfig | None = None, action_noise: float | Sequence[float] = 0.0) -> EpisodeDataset:
     """Run the expert on the seeded reference resets ``seed, seed + 1, ...`` and collect
     ``n_episodes`` successful demonstrations (a failed seed, rare, is skipped and listed in
     ``meta["failed_seeds"]``). Deterministic: the same arguments give identical arrays.
+
+    ``action_noise``: DART-style execution noise (px, see ``PushTExpert.run_episode``); a
+    sequence is cycled over the attempts, e.g. ``(0, 10)`` alternates clean and noisy
+    episodes. Each episode's level is in ``meta["episode_noise"]``.
 
     Arrays (N steps over all episodes; row t is the state BEFORE action t):
         "state"    (N, 5) float64 [agent_x, agent_y, block_x, block_y, block_angle UNWRAPPED]
@@ -340,7 +361,7 @@ def collect_dataset(n_episodes: int, seed: int, progress: bool = True,
         "coverage" (N,)   float64 coverage of the row's state
         "phase"    (N,)   int8 0 settle, 1 travel, 2 push, 3 rest (see ``PHASE_NAMES``)
     Meta: env_id, obs_type, expert, expert_version, expert_config, seed, n_episodes,
-    episode_seeds, failed_seeds, success_steps (first coverage > 0.95), finish_steps (where the
+    action_noise, episode_noise, episode_seeds, failed_seeds, success_steps (first coverage > 0.95), finish_steps (where the
     rest begins; see ``EpisodeRecord``), route_choices (per episode, one dict per coin
     toss), rest_steps, coursekit_version. Pixel observations can be rendered from the stored
     states afterwards (``coursekit.envs.pusht_render``).
@@ -354,22 +375,29 @@ def collect_dataset(n_episodes: int, seed: int, progress: bool = True,
         raise ValueError(f"n_episodes must be a positive int, got {n_episodes!r}")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed must be a non-negative int, got {seed!r}")
+    levels = [float(action_noise)] if np.isscalar(action_noise) else [float(v) for v in action_noise]
+    if not levels or not all(math.isfinite(v) and v >= 0 for v in levels):
+        raise ValueError(f"action_noise must be a standard deviation >= 0 (px) or a non-empty sequence of them, "
+                         f"got {action_noise!r}")
     expert = PushTExpert(config)
     env = PushTEnv(obs_type="state", max_episode_steps=expert.config.max_steps)
     episodes, meta_seeds, failed, success_steps, finish_steps, choices = [], [], [], [], [], []
+    episode_noise = []
     max_attempts = 2 * int(n_episodes) + 10
     with tqdm(total=int(n_episodes), desc="PushT expert", unit="episode", disable=not progress) as bar:
         for attempt in range(max_attempts):
             if len(episodes) == n_episodes:
                 break
             episode_seed = int(seed) + attempt
-            rec = expert.run_episode(env, episode_seed)
+            level = levels[attempt % len(levels)]
+            rec = expert.run_episode(env, episode_seed, action_noise=level)
             if rec.success_step is None:
                 failed.append(episode_seed)
                 continue
             episodes.append({"state": rec.states, "action": rec.actions,
                              "coverage": rec.coverage, "phase": rec.phases})
             meta_seeds.append(episode_seed)
+            episode_noise.append(level)
             success_steps.append(rec.success_step)
             finish_steps.append(rec.finish_step)
             choices.append(rec.route_choices)
@@ -382,6 +410,7 @@ def collect_dataset(n_episodes: int, seed: int, progress: bool = True,
         "expert": EXPERT_NAME, "expert_version": EXPERT_VERSION,
         "expert_config": asdict(expert.config),
         "seed": int(seed), "n_episodes": int(n_episodes),
+        "action_noise": levels[0] if len(levels) == 1 else levels, "episode_noise": episode_noise,
         "episode_seeds": meta_seeds, "failed_seeds": failed, "success_steps": success_steps,
         "finish_steps": finish_steps,
         "route_choices": choices, "rest_steps": expert.config.rest_steps,
