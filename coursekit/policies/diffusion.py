@@ -16,12 +16,12 @@ sampler for speed (``sampler="ddpm"`` reproduces the paper's evaluation setting)
 
 DDIM walks the reference code's "leading" timesteps (90, 80, ..., 0 for 10 steps);
 ``ddim_timestep_spacing="trailing"`` walks diffusers' 99, 89, ..., 9 instead, which starts where
-pure noise really is the network's training input (Lin et al. 2024). On the 20-minute CPU model
-it was no better, measured: 0.828 vs 0.782 (trailing vs leading) on 100 validation seeds from
-200000, but 0.723 vs 0.788 on the 50 protocol seeds from 100000 — differences of this size are
-evaluation noise (score stderr ~0.05 at 50 episodes), so the paper's choice stays the default.
-(Measured with ``coursekit eval CKPT --ddim-spacing {leading,trailing} [--episodes 100
---seed-start 200000]`` on the checkpoint of ``benchmarks.bench_diffusion_policy --only score``.)
+pure noise really is the network's training input (Lin et al. 2024). On a 20-minute CPU model
+(clean demonstrations, (x, y, sin, cos) state) it was no better, measured: 0.828 vs 0.782
+(trailing vs leading) on 100 validation seeds from 200000, but 0.723 vs 0.788 on the 50
+protocol seeds from 100000 — differences of this size are evaluation noise (score stderr ~0.05
+at 50 episodes), so the paper's choice stays the default. (Measured with ``coursekit eval CKPT
+--ddim-spacing {leading,trailing} [--episodes 100 --seed-start 200000]``.)
 """
 
 from __future__ import annotations
