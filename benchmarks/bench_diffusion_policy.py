@@ -54,6 +54,7 @@ from benchmarks.results import record
 from coursekit.checkpoint import copy_checkpoint_half, load_checkpoint, read_checkpoint_info
 from coursekit.data.episodes import EpisodeDataset
 from coursekit.evaluate import evaluate_pusht
+from coursekit.experts.pusht_planner import noise_tag
 from coursekit.nn.unet1d import UNet1DConfig
 from coursekit.policies.factory import make_pusht_policy
 from coursekit.train import TrainConfig, train
@@ -94,9 +95,8 @@ def run_dir(kind: str, args: argparse.Namespace) -> Path:
 
 def data_tag(args: argparse.Namespace) -> str:
     """Name suffix for non-default demonstrations / observation features ('' for the defaults)."""
-    noise = "" if set(args.action_noise) == {0.0} else "_noise" + "-".join(f"{v:g}" for v in args.action_noise)
     feats = "" if args.features == "pusht_state" else "_" + args.features.removeprefix("pusht_")
-    return noise + feats
+    return noise_tag(args.action_noise) + feats
 
 
 def train_policy(kind: str, dataset: EpisodeDataset, args: argparse.Namespace, out: Path) -> dict:
@@ -189,8 +189,8 @@ def main(argv: list[str] | None = None) -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(args.threads)
     load = os.getloadavg()[0]
-    noise_tag = "" if set(args.action_noise) == {0.0} else "_noise" + "-".join(f"{v:g}" for v in args.action_noise)
-    dataset = load_or_collect(args.out / f"pusht_{args.demos}ep_seed0{noise_tag}.npz", args.demos, 0, args.action_noise)
+    dataset = load_or_collect(args.out / f"pusht_{args.demos}ep_seed0{noise_tag(args.action_noise)}.npz", args.demos, 0,
+                              args.action_noise)
     rec = (lambda *a, **k: None) if args.no_record else record  # noqa: E731
     machine = f"this command ran with {args.threads} torch thread(s), load average {load:.1f} at its start"
 
@@ -257,7 +257,7 @@ def main(argv: list[str] | None = None) -> None:
             print(f"{label}: score {r.score:.3f} +- {r.summary()['score_stderr']:.3f}, success {r.success_rate:.0%}, "
                   f"{summary['steps']} steps in {summary['seconds']:.0f} s, eval {time.perf_counter() - t0:.0f} s")
 
-    demos = f"{args.demos} expert demos" + ("" if not noise_tag else
+    demos = f"{args.demos} expert demos" + ("" if not noise_tag(args.action_noise) else
                                             f" (DART execution noise {'/'.join(f'{v:g}' for v in args.action_noise)} px, cycled)")
     note = (f"{demos}, {args.features} features, {args.minutes:g} min training (recipe {args.recipe}: U-Net {args.down_dims}, "
             f"batch {args.batch_size}, lr {args.lr:g}), {args.episodes} held-out seeds from 100000, 300 steps, {machine}")

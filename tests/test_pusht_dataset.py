@@ -108,6 +108,9 @@ def test_collect_cycles_dart_noise_levels():
     assert mixed.meta["episode_seeds"] == [5, 6] and clean.meta["episode_noise"] == [0.0]
     for key in ("state", "action"):
         assert np.array_equal(mixed.episode(0)[key], clean.episode(0)[key])
+    from coursekit.experts.pusht_planner import noise_tag
+
+    assert noise_tag(mixed.meta["action_noise"]) == "_noise0-10" and noise_tag([0.0]) == ""
 
 
 def test_collect_command_writes_a_dataset(tmp_path):

@@ -45,7 +45,11 @@ def run(args: argparse.Namespace) -> int:
         except ValueError:
             raise ValueError(f"--action-noise must be a number or a comma list of numbers (px), "
                              f"got {args.action_noise!r}") from None
-    tag = "" if set(extra.get("action_noise", (0.0,))) == {0.0} else "_noise" + "-".join(f"{v:g}" for v in extra["action_noise"])
+    tag = ""
+    if "action_noise" in extra:
+        from coursekit.experts.pusht_planner import noise_tag
+
+        tag = noise_tag(extra["action_noise"])
     out = args.out or Path("outputs/data") / f"{args.task}_{episodes}ep_seed{args.seed}{tag}.npz"
     start = time.perf_counter()
     dataset = collect(episodes, args.seed, progress=not args.no_progress, **extra)

@@ -43,7 +43,7 @@ from coursekit.experts.pusht_routes import ANTICLOCKWISE, CLOCKWISE, STRAIGHT, s
 if TYPE_CHECKING:
     from coursekit.data import EpisodeDataset
 
-__all__ = ["TWO_WAY_START", "EpisodeRecord", "ExpertConfig", "PushTExpert", "collect_dataset"]
+__all__ = ["TWO_WAY_START", "EpisodeRecord", "ExpertConfig", "PushTExpert", "collect_dataset", "noise_tag"]
 
 EXPERT_NAME = "coursekit.experts.pusht_planner"
 EXPERT_VERSION = "1"
@@ -345,6 +345,11 @@ class _Recorder:
 # --------------------------------------------------------------------------------------------
 # A dataset of demonstrations
 # --------------------------------------------------------------------------------------------
+def noise_tag(action_noise: Sequence[float]) -> str:
+    """File-name suffix for DART noise levels: '' for clean data, '_noise0-5' for (0, 5)."""
+    return "" if set(action_noise) <= {0.0} else "_noise" + "-".join(f"{float(v):g}" for v in action_noise)
+
+
 def collect_dataset(n_episodes: int, seed: int, progress: bool = True,
                     config: ExpertConfig | None = None, action_noise: float | Sequence[float] = 0.0) -> EpisodeDataset:
     """Run the expert on the seeded reference resets ``seed, seed + 1, ...`` and collect
