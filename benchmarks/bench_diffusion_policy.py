@@ -54,7 +54,7 @@ from benchmarks.results import record
 from coursekit.checkpoint import copy_checkpoint_half, load_checkpoint, read_checkpoint_info
 from coursekit.data.episodes import EpisodeDataset
 from coursekit.evaluate import evaluate_pusht
-from coursekit.experts.pusht_planner import noise_tag
+from coursekit.experts.pusht_planner import noise_tag, parse_action_noise
 from coursekit.nn.unet1d import UNet1DConfig
 from coursekit.policies.factory import make_pusht_policy
 from coursekit.train import TrainConfig, train
@@ -182,7 +182,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--ship", action="store_true", help="copy the trained checkpoints to coursekit/checkpoints/")
     parser.add_argument("--no-record", action="store_true", help="print only, do not write results.json")
     args = parser.parse_args(argv)
-    args.action_noise = tuple(float(v) for v in str(args.action_noise).split(","))
+    args.action_noise = parse_action_noise(args.action_noise)
     base = TrainConfig.recipe(args.recipe, max_steps=1)
     args.lr = args.lr if args.lr is not None else base.lr
     args.batch_size = args.batch_size if args.batch_size is not None else base.batch_size

@@ -36,19 +36,13 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--episodes must be at least 1, got {episodes}")
     module_name, func_name = TASKS[args.task].split(":")
     collect = getattr(importlib.import_module(module_name), func_name)
-    extra = {}
+    extra, tag = {}, ""
     if args.action_noise is not None:
         if args.task != "pusht":
             raise ValueError(f"--action-noise is for the pusht expert only, not {args.task!r}")
-        try:
-            extra["action_noise"] = tuple(float(v) for v in str(args.action_noise).split(","))
-        except ValueError:
-            raise ValueError(f"--action-noise must be a number or a comma list of numbers (px), "
-                             f"got {args.action_noise!r}") from None
-    tag = ""
-    if "action_noise" in extra:
-        from coursekit.experts.pusht_planner import noise_tag
+        from coursekit.experts.pusht_planner import noise_tag, parse_action_noise
 
+        extra["action_noise"] = parse_action_noise(args.action_noise)
         tag = noise_tag(extra["action_noise"])
     out = args.out or Path("outputs/data") / f"{args.task}_{episodes}ep_seed{args.seed}{tag}.npz"
     start = time.perf_counter()

@@ -43,7 +43,8 @@ from coursekit.experts.pusht_routes import ANTICLOCKWISE, CLOCKWISE, STRAIGHT, s
 if TYPE_CHECKING:
     from coursekit.data import EpisodeDataset
 
-__all__ = ["TWO_WAY_START", "EpisodeRecord", "ExpertConfig", "PushTExpert", "collect_dataset", "noise_tag"]
+__all__ = ["TWO_WAY_START", "EpisodeRecord", "ExpertConfig", "PushTExpert", "collect_dataset", "noise_tag",
+           "parse_action_noise"]
 
 EXPERT_NAME = "coursekit.experts.pusht_planner"
 EXPERT_VERSION = "1"
@@ -345,6 +346,14 @@ class _Recorder:
 # --------------------------------------------------------------------------------------------
 # A dataset of demonstrations
 # --------------------------------------------------------------------------------------------
+def parse_action_noise(text: str) -> tuple[float, ...]:
+    """Noise levels from the command line: '5' -> (5.0,), '0,5' -> (0.0, 5.0) (px)."""
+    try:
+        return tuple(float(v) for v in str(text).split(","))
+    except ValueError:
+        raise ValueError(f"--action-noise must be a number or a comma list of numbers (px), got {text!r}") from None
+
+
 def noise_tag(action_noise: Sequence[float]) -> str:
     """File-name suffix for DART noise levels: '' for clean data, '_noise0-5' for (0, 5)."""
     return "" if set(action_noise) <= {0.0} else "_noise" + "-".join(f"{float(v):g}" for v in action_noise)
@@ -415,7 +424,7 @@ def collect_dataset(n_episodes: int, seed: int, progress: bool = True,
         "expert": EXPERT_NAME, "expert_version": EXPERT_VERSION,
         "expert_config": asdict(expert.config),
         "seed": int(seed), "n_episodes": int(n_episodes),
-        "action_noise": levels[0] if len(levels) == 1 else levels, "episode_noise": episode_noise,
+        "action_noise": levels, "episode_noise": episode_noise,
         "episode_seeds": meta_seeds, "failed_seeds": failed, "success_steps": success_steps,
         "finish_steps": finish_steps,
         "route_choices": choices, "rest_steps": expert.config.rest_steps,
