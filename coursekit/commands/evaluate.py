@@ -92,7 +92,7 @@ def _run_aloha(args: argparse.Namespace, policy, info: dict, seeds: list[int]) -
 
 
 def _report(args: argparse.Namespace, summary: dict) -> int:
-    from coursekit.io import atomic_write_text
+    from coursekit.atomic import atomic_write_text
 
     text = json.dumps(summary, indent=1)
     print(text)

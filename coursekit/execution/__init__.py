@@ -10,8 +10,7 @@ Classes load lazily (``coursekit.execution.receding`` needs neither torch nor nu
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from coursekit.lazy import lazy_loader
 
 _LAZY = {
     "RecedingHorizon": "coursekit.execution.receding",
@@ -19,9 +18,4 @@ _LAZY = {
     "TemporalEnsemble": "coursekit.execution.ensembling",
 }
 __all__ = sorted(_LAZY)
-
-
-def __getattr__(name: str) -> Any:
-    if name not in _LAZY:
-        raise AttributeError(f"module 'coursekit.execution' has no attribute {name!r}")
-    return getattr(importlib.import_module(_LAZY[name]), name)
+__getattr__, __dir__ = lazy_loader(__name__, _LAZY)
