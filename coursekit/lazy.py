@@ -41,6 +41,7 @@ def lazy_loader(package: str, table: Mapping[str, str], submodules: bool = False
         return value
 
     def __dir__() -> list[str]:
-        return names
+        public = (n for n in vars(sys.modules[package]) if not n.startswith("_"))
+        return sorted(set(names).union(public))
 
     return __getattr__, __dir__
