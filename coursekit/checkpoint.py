@@ -266,10 +266,15 @@ def shipped_checkpoints() -> list[str]:
     return sorted(p.name for p in SHIPPED_DIR.iterdir() if (p / CONFIG_FILE).is_file()) if SHIPPED_DIR.is_dir() else []
 
 
-def find_checkpoint(name: str) -> Path:
-    """The directory of the shipped checkpoint ``name`` (e.g. "pusht_diffusion_state"); unknown -> FileNotFoundError."""
-    path = SHIPPED_DIR / name
-    if not (path / CONFIG_FILE).is_file():
-        raise FileNotFoundError(f"no shipped checkpoint {name!r} in {str(SHIPPED_DIR)!r}; "
-                                f"shipped: {shipped_checkpoints()}")
-    return path
+def find_checkpoint(*names: str, also_in: tuple[str | os.PathLike, ...] = ()) -> Path | None:
+    """The first checkpoint called one of ``names`` among the shipped ones, then in the folders ``also_in``.
+
+    E.g. ``find_checkpoint("act_transfer_cube", also_in=("outputs/checkpoints",))``: the shipped
+    checkpoint if there is one, else one trained by a benchmark; None when there is none (a
+    notebook then trains a stand-in).
+    """
+    for folder in (SHIPPED_DIR, *map(Path, also_in)):
+        for name in names:
+            if (folder / name / CONFIG_FILE).is_file():
+                return folder / name
+    return None
