@@ -31,6 +31,8 @@ METRICS_NAME = "metrics.csv"
 """File name of the table inside a run folder."""
 LOSS_PLOT_NAME = "loss.png"
 """File name of the loss curve inside a run folder."""
+FIG_SIZE_IN, DPI = (7.5, 5.2), 100
+"""Size (inches) and resolution of loss.png: 750 x 520 pixels."""
 
 
 def read_metrics(metrics_csv: str | Path) -> dict[str, np.ndarray]:
@@ -72,6 +74,22 @@ def _duration(seconds: float) -> str:
     return f"{seconds:.1f} s" if seconds < 120 else f"{seconds / 60:.1f} min" if seconds < 7200 else f"{seconds / 3600:.2f} h"
 
 
+def _minor_label(value: float, _pos: int) -> str:
+    """Label a log axis' minor tick only at 2 and 5 times a power of ten (fewer, readable labels)."""
+    if not value > 0:
+        return ""
+    lead = round(value / 10 ** math.floor(math.log10(value)), 6)
+    return f"{value:g}" if lead in (2.0, 5.0) else ""
+
+
+def summary_title(metrics: Mapping[str, np.ndarray]) -> str:
+    """"<total steps> steps in <wall time>, <mean samples/s> samples/s on average" of read metrics."""
+    step, sps, wall = (metrics[k][np.isfinite(metrics[k])] for k in ("step", "samples_per_s", "wall_s"))
+    total = int(step.max()) if len(step) else 0
+    mean_sps = f"{sps.mean():.0f}" if len(sps) else "?"
+    return f"{total} steps in {_duration(float(wall.max()) if len(wall) else math.nan)}, {mean_sps} samples/s on average"
+
+
 def plot_metrics(metrics_csv: str | Path, out_png: str | Path) -> Path:
     """Draw a metrics CSV (see :data:`COLUMNS`) to ``out_png``; return its path.
 
@@ -83,6 +101,7 @@ def plot_metrics(metrics_csv: str | Path, out_png: str | Path) -> Path:
     Raises ValueError when the CSV has no rows (nothing to draw), plus what :func:`read_metrics` raises.
     """
     from matplotlib.figure import Figure
+    from matplotlib.ticker import FuncFormatter
 
     from coursekit.io import atomic_path
 
@@ -93,18 +112,20 @@ def plot_metrics(metrics_csv: str | Path, out_png: str | Path) -> Path:
         raise ValueError(f"{path} has a header but no rows: nothing to plot")
     step, loss, lr = m["step"], m["loss"], m["lr"]
     ok = np.isfinite(step) & np.isfinite(loss)
-    fig = Figure(figsize=(7.5, 5.2), layout="constrained")
+    fig = Figure(figsize=FIG_SIZE_IN, layout="constrained")
     ax_loss, ax_lr = fig.subplots(2, 1, sharex=True, height_ratios=[3, 1])
     window = max(1, n // 50)
     label = "loss (each logged step)"
     if (~ok).sum():
         label += f"; {(~ok).sum()} non-finite left out"
-    ax_loss.plot(step[ok], loss[ok], lw=0.8, alpha=0.35 if window > 1 else 1.0, color="tab:blue", label=label)
+    ax_loss.plot(step[ok], loss[ok], lw=0.8 if window > 1 else 1.5, alpha=0.35 if window > 1 else 1.0, color="tab:blue", label=label)
     if window > 1 and ok.sum() > 1:
         ax_loss.plot(step[ok], _running_mean(loss[ok], window), lw=2.0, color="tab:blue",
                      label=f"trailing mean of {window} rows")
     if ok.any() and np.all(loss[ok] > 0):
         ax_loss.set_yscale("log")
+        ax_loss.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))  # 0.1, not 10^-1
+        ax_loss.yaxis.set_minor_formatter(FuncFormatter(_minor_label))
     ax_loss.set_ylabel("training loss")
     ax_loss.grid(True, which="both", alpha=0.3)
     ax_loss.legend(loc="upper right", fontsize=8)
@@ -114,14 +135,10 @@ def plot_metrics(metrics_csv: str | Path, out_png: str | Path) -> Path:
     ax_lr.set_xlabel("optimiser step")
     ax_lr.grid(True, alpha=0.3)
     ax_lr.ticklabel_format(axis="y", style="sci", scilimits=(-2, 3))
-    sps = m["samples_per_s"][np.isfinite(m["samples_per_s"])]
-    wall = m["wall_s"][np.isfinite(m["wall_s"])]
-    total_steps = int(np.nanmax(step)) if np.isfinite(step).any() else n
-    fig.suptitle(f"{total_steps} steps in {_duration(float(wall.max()) if len(wall) else float('nan'))}, "
-                 f"{sps.mean() if len(sps) else float('nan'):.0f} samples/s on average", fontsize=11)
+    fig.suptitle(summary_title(m), fontsize=11)
     out = Path(out_png)
     with atomic_path(out, suffix=".png") as tmp:
-        fig.savefig(tmp, dpi=100, format="png")
+        fig.savefig(tmp, dpi=DPI, format="png")
     return out
 
 
