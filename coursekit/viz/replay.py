@@ -178,8 +178,9 @@ def _played_states(episodes: list[EpisodeRecording], hold: int) -> np.ndarray:
 def _caption_overlay(task: str, episodes: list[EpisodeRecording], starts_s: list[float]) -> str:
     """A fixed caption box and a script that names the episode at the animation's current time.
 
-    It reads ``viewer.animator.time`` (the meshcat 0.3 viewer the page creates as the global
-    ``viewer``; the time the slider shows). Without it the box still lists every episode.
+    It reads ``viewer.animator.time`` (the time meshcat's slider shows; ``viewer`` is the global
+    the exported page creates, as in the pinned meshcat 0.3.2). Without it the box still lists
+    every episode and when it starts.
     """
     rows = "".join(
         f"<tr data-start='{s:.3f}'><td>{i + 1}.</td><td style='padding:0 8px'>{html.escape(ep.caption())}</td>"
@@ -228,7 +229,7 @@ def replay_html(task: str, episodes: list[EpisodeRecording], fps: float, scene: 
         else:
             from coursekit.viz.mujoco_meshcat import MujocoMeshcat
 
-            MujocoMeshcat(model, scene).animate_qpos(states, fps=fps, play=True)
+            MujocoMeshcat(_arm_model(task) if model is None else model, scene).animate_qpos(states, fps=fps, play=True)
         page = scene.static_html()
     finally:
         if own:
