@@ -8,6 +8,7 @@ adapters -- for every combination, not the learning (tests/test_train.py and the
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -58,3 +59,35 @@ def test_train_then_eval_every_policy_on_every_task(policy, task, demos, tmp_pat
         assert set(summary["stage_rates"]) == {"1", "2", "3", "4"} and 0.0 <= summary["strict_success_rate"] <= 1.0
     if policy == "diffusion":
         assert summary["sampler"] == "ddim" and summary["num_inference_steps"] == 2
+
+
+@pytest.mark.parametrize("policy,task", [("diffusion", "pusht"), ("act", "transfer_cube")])
+def test_a_run_folder_and_an_eval_replay_a_person_can_look_at(policy, task, demos, tmp_path):
+    """train writes metrics.csv + loss.png beside the checkpoint; eval --record writes a replay that a browser draws."""
+    import csv
+
+    from PIL import Image
+
+    run = tmp_path / "run"
+    assert main(["train", "--policy", policy, "--data", str(demos[task]), "--steps", "4", "--batch-size", "4",
+                 "--warmup-steps", "1", "--out", str(run), "--threads", "1", "--no-progress", *SMALL[policy]]) == 0
+    rows = list(csv.DictReader((run / "metrics.csv").open()))
+    assert [int(r["step"]) for r in rows] == [4] and set(rows[0]) == {"step", "loss", "lr", "samples_per_s", "wall_s"}
+    assert Image.open(run / "loss.png").size[0] > 100 and (run / "config.json").is_file()
+    record = tmp_path / "replay"
+    out = tmp_path / "eval.json"
+    assert main(["eval", str(run), "--episodes", "2", "--max-steps", "6", "--threads", "1", "--no-progress",
+                 "--record", str(record), "--record-episodes", "1", "--json", str(out)]) == 0
+    files = json.loads(out.read_text())["record"]
+    assert sorted(p.name for p in record.iterdir()) == ["frames.png", "replay.html"] == sorted(
+        Path(f).name for f in files.values())
+    assert main(["eval", str(run), "--episodes", "1", "--max-steps", "2", "--no-progress", "--record", str(record)]) == 2
+
+    from coursekit.viz.browser import find_chromium, screenshot_html
+
+    if find_chromium() is None:
+        pytest.skip("headless chromium not installed (make test installs it as root)")
+    img = np.asarray(Image.open(screenshot_html(record / "replay.html", tmp_path / "shot.png", budget_ms=1500))
+                     .convert("RGB"), dtype=np.float64)[120:]  # below the caption box
+    background = np.median(img[:, :4], axis=1, keepdims=True)  # meshcat's vertical gradient, row by row
+    assert (np.abs(img - background).max(axis=-1) > 30).mean() > 0.05, "the replay page is blank"

@@ -55,7 +55,7 @@ def _overrides(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _check_record_dir(args: argparse.Namespace) -> None:
-    """Before any evaluation: --record must name a new (or empty) folder, and the replay writer must exist."""
+    """Before any evaluation: --record must name a new (or empty) folder."""
     if args.record is None:
         return
     if args.record_episodes < 1:
@@ -63,10 +63,6 @@ def _check_record_dir(args: argparse.Namespace) -> None:
     if args.record.exists() and (not args.record.is_dir() or any(args.record.iterdir())):
         raise ValueError(f"--record {str(args.record)!r} exists and is not an empty folder; choose a new folder "
                          "(nothing is overwritten)")
-    import importlib.util
-
-    if importlib.util.find_spec("coursekit.viz.replay") is None:
-        raise ValueError("--record needs coursekit.viz.replay, which this installation lacks")
 
 
 def run(args: argparse.Namespace) -> int:

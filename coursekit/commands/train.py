@@ -102,6 +102,7 @@ def run(args: argparse.Namespace) -> int:
     from coursekit.policies import get_policy_class
     from coursekit.policies.factory import make_policy
     from coursekit.train import TrainConfig, train
+    from coursekit.viz.run_log import MetricsLog
 
     if args.minutes is None and args.steps is None:
         raise ValueError("give a budget: --minutes M and/or --steps N")
@@ -129,15 +130,9 @@ def run(args: argparse.Namespace) -> int:
     prior = warm_start(policy, args.init_from) if args.init_from is not None else None
     if prior is not None:
         print(f"warm start from {args.init_from} ({prior['steps']} steps, {prior['seconds']} s)")
-    callbacks: list[Any] = [CheckpointSaver(args.out, dataset_meta=meta)]
-    metrics = _metrics_log(args.out)
-    if metrics is not None:
-        callbacks.append(metrics)
-    try:
-        result = train(policy, batches, config, callbacks=callbacks, init_from=prior)
-    finally:
-        if metrics is not None:
-            metrics.close()
+    with MetricsLog(args.out) as metrics:  # metrics.csv + loss.png beside the checkpoint, during training
+        result = train(policy, batches, config, callbacks=[CheckpointSaver(args.out, dataset_meta=meta), metrics],
+                       init_from=prior)
     s = result.summary
     print(json.dumps({k: s[k] for k in ("steps", "seconds", "samples_per_s", "final_loss")}))
     print(f"wrote {args.out}")
@@ -145,20 +140,10 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _check_out(out: Path) -> None:
-    """Before any work: --out must be a new folder or a checkpoint this command wrote (it is replaced)."""
+    """Before any work: --out must be a new (or empty) folder; nothing already there is overwritten."""
     if out.exists() and not out.is_dir():
-        raise ValueError(f"--out {str(out)!r} is a file; give a run folder to create")
-    if out.is_dir() and any(out.iterdir()) and not (out / "config.json").is_file():
-        raise ValueError(f"--out {str(out)!r} is a non-empty folder that is not a coursekit run; "
-                         "choose a new folder (nothing was written)")
-
-
-def _metrics_log(out: Path) -> Any:
-    """metrics.csv + loss.png in the run folder (coursekit.viz.run_log), or None where that module is absent."""
-    try:
-        from coursekit.viz.run_log import MetricsLog
-    except ModuleNotFoundError as exc:
-        if exc.name != "coursekit.viz.run_log":
-            raise
-        return None
-    return MetricsLog(out)
+        raise ValueError(f"--out {str(out)!r} is a file; give a new run folder")
+    if out.is_dir() and any(out.iterdir()):
+        kind = "an earlier run" if (out / "config.json").is_file() else "not a coursekit run"
+        raise ValueError(f"--out {str(out)!r} is a non-empty folder ({kind}); choose a new run folder "
+                         "(nothing was written)")

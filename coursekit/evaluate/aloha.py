@@ -74,8 +74,8 @@ class ArmPairAdapter:
         return result.states[..., len(STATE_COLUMNS):]  # (N, T+1, nq) MuJoCo qpos
 
     def episode_scores(self, result: EvalResult) -> tuple[np.ndarray, np.ndarray]:
-        """Score: highest stage reached / 4; success: the strict (final-state) judgement."""
-        return result.states[:, :, 0].max(axis=1) / 4.0, result.states[:, -1, 1] > 0.5
+        """Score: the highest stage reached (0..4, the reward); success: the strict (final-state) judgement."""
+        return result.states[:, :, 0].max(axis=1), result.states[:, -1, 1] > 0.5
 
 
 def evaluate_aloha(policy: Any, task: str = "transfer_cube", n_episodes: int = 50, seeds: Sequence[int] | None = None,
