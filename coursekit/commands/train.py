@@ -26,20 +26,21 @@ import json
 from pathlib import Path
 from typing import Any
 
+from coursekit.data.features import FEATURES  # numpy only: `coursekit --help` stays instant
+from coursekit.policies import POLICY_TYPES  # the registry itself (no torch until a class is used)
+
 HELP = "train a chunk policy (diffusion, regression baseline or act) on PushT or arm-pair demonstrations"
-POLICY_CHOICES = ("diffusion", "regression", "act")  # kept literal so `coursekit --help` imports no torch
-FEATURE_CHOICES = ("pusht_state", "pusht_keypoints", "pusht_image", "aloha_state", "aloha_qpos")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--policy", choices=POLICY_CHOICES, default="diffusion",
+    parser.add_argument("--policy", choices=sorted(POLICY_TYPES), default="diffusion",
                         help="policy head (default: diffusion; act = ACT, the transformer CVAE)")
     parser.add_argument("--data", type=Path, required=True, help="demonstrations .npz (from `coursekit collect ...`)")
     parser.add_argument("--out", type=Path, required=True,
                         help="run folder to create: checkpoint (model.safetensors + config.json), metrics.csv, loss.png")
     parser.add_argument("--minutes", type=float, default=None, help="wall-clock training budget in minutes")
     parser.add_argument("--steps", type=int, default=None, help="optimiser steps (default: until --minutes is used up)")
-    parser.add_argument("--features", choices=FEATURE_CHOICES, default=None,
+    parser.add_argument("--features", choices=sorted(FEATURES), default=None,
                         help="observation features (default: from the data: pusht_state = agent xy, block xy, sin/cos "
                              "angle for PushT, aloha_state = qpos + object poses for the arm pair)")
     parser.add_argument("--chunk-size", type=int, default=None, help="k, actions per ACT chunk (default: ACTConfig's)")
