@@ -182,3 +182,20 @@ def test_image_policy_end_to_end_smoke():
     result = train(policy, batches, TrainConfig(max_steps=2, warmup_steps=1, progress=False))
     r = evaluate_pusht(result.policy, n_episodes=2, max_steps=3, progress=False)
     assert r.chunk_calls == 1 and 0.0 <= r.score <= 1.0
+
+
+def test_evaluation_overrides_are_validated_copies():
+    policy = tiny_policy()
+    copy = policy.with_config(ddim_timestep_spacing="trailing", n_action_steps=4)
+    assert copy.config.ddim_timestep_spacing == "trailing" and copy.execution_spec().n_action_steps == 4
+    assert policy.config.ddim_timestep_spacing == "leading" and policy.config.n_action_steps == 8  # untouched
+    assert copy.unet is policy.unet  # the same weights, not a second model
+    with pytest.raises(ValueError, match="To - 1 \\+ Ta must fit in Tp"):
+        policy.with_config(n_action_steps=16)  # validated by the config's __post_init__
+    with pytest.raises(ValueError, match="not evaluation settings"):
+        policy.with_config(horizon=32)  # would not fit the weights
+    with pytest.raises(ValueError, match="ddim_timestep_spacing"):
+        policy.with_config(ddim_timestep_spacing="middle")
+    assert policy.describe_sampling(sampler="ddpm")["num_inference_steps"] == 100
+    with pytest.raises(ValueError, match="no sampling option"):
+        policy.check_sampling({"temperature": 0.5})

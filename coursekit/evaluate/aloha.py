@@ -10,6 +10,9 @@ both grasped, both lifted, peg touches socket, inserted). Reported:
 - ``strict_success_rate``: fraction of episodes whose FINAL state is a finished task (the cube
   still held, the peg still in the socket) — the stricter judgement the demonstrations pass.
 
+The env's reward is the stage, so ``EvalResult.score`` is the mean highest stage (0..4) and
+``success_rate`` the published (lenient) success.
+
 The adapter plugs the arm pair into :func:`coursekit.evaluate.closed_loop.evaluate` (B environments in
 lock-step, any policy, any executor).
 """
