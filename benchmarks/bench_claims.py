@@ -40,6 +40,10 @@ POLICIES = {"dp_ddim10": ("pusht_diffusion_state", {"sampler": "ddim", "num_infe
             "regression": ("pusht_regression_state", {}, "chunked regression")}
 PARTS = ("table", "eval", "subsets", "hesitation", "commitment")
 TRAINING = "one training seed (the shipped checkpoint)"
+TRAINED = {"dp_ddim10": "DP trained 19259 steps (20 min on 2 threads + 40 min on 1)",
+           "dp_ddpm100": "DP trained 19259 steps (20 min on 2 threads + 40 min on 1)",
+           "regression": "8510 steps (31 min on 1 thread)"}
+"""Training of the shipped checkpoints (their config.json "training"): the two are NOT step-matched."""
 
 
 def seed_range(seeds: list[int]) -> str:
@@ -168,17 +172,25 @@ def main(argv: list[str] | None = None) -> int:
         label = POLICIES[name][2]
         subsets = {"all starts": np.ones_like(two), "two-way starts": two, "other starts": ~two}
         for subset, mask in subsets.items():
+            where = seed_range(seeds) + ("" if subset == "all starts" else f" ({subset.split()[0]} subset)")
             if "subsets" in args.parts or "eval" in args.parts:
                 score, success = estimates(data["max_reward"][mask], data["success"][mask])
-                rec(f"{label} score, {subset}", score, "", f"mean of max reward; success {success}; {TRAINING}")
-                rec(f"{label} success, {subset}", success, "", f"coverage > 0.95 within 300 steps; {TRAINING}")
+                rec(f"{label} score, {subset}", score, "", f"mean of max reward; success {success}; {TRAINING}; "
+                    f"{TRAINED[name]}", where)
+                rec(f"{label} success, {subset}", success, "", f"coverage > 0.95 within 300 steps; {TRAINING}; "
+                    f"{TRAINED[name]}", where)
             if "hesitation" in args.parts:
-                from coursekit.evaluate.behaviour import stalled_steps
+                from coursekit.evaluate.behaviour import stalled_steps, still_steps
 
                 stall = stalled_steps(data["states"][mask], data["length"][mask])
                 rec(f"{label} steps stalled against the block, {subset}", estimates(stall.astype(float))[0], "steps",
                     "per episode: pusher within 3 px of the T, moving < 2 px/step, T still (< 0.5 px, 0.005 rad); "
-                    f"mean of {np.mean(data['length'][mask]):.0f} steps per episode; {TRAINING}")
+                    f"mean of {np.mean(data['length'][mask]):.0f} steps per episode; {TRAINING}", where)
+                rec(f"{label} episodes with >= 20 steps stalled against the block, {subset}",
+                    rate_estimate(stall >= 20), "", f"stalled as in the row above; {TRAINING}", where)
+                early = still_steps(data["states"][mask], data["length"][mask], first=40)
+                rec(f"{label} steps near-still in the first 40, {subset}", estimates(early.astype(float))[0], "steps",
+                    f"pusher moving < 2 px/step anywhere (dithering at the fork would show here); {TRAINING}", where)
     if "subsets" in args.parts:
         for dp in [p for p in results if p.startswith("dp_")]:
             if "regression" not in results:
@@ -186,13 +198,17 @@ def main(argv: list[str] | None = None) -> int:
             diff = results[dp]["max_reward"] - results["regression"]["max_reward"]
             for subset, mask in {"two-way starts": two, "other starts": ~two}.items():
                 rec(f"{POLICIES[dp][2]} minus chunked regression, {subset}", estimates(diff[mask])[0], "",
-                    f"paired per seed, bootstrap over seeds; {TRAINING} each")
+                    f"paired per seed, bootstrap over seeds; {TRAINING} each; NOT step-matched: "
+                    f"{TRAINED[dp]}, regression {TRAINED['regression']}",
+                    seed_range(seeds) + f" ({subset.split()[0]} subset)")
     if "commitment" in args.parts:
         from benchmarks.claims_commitment import commitment
 
         starts = [s for s in seeds if flags[s]["two_way"]][: args.commit_starts]
-        for row in commitment(starts, args.commit_samples, load_policy):
-            rec(row["name"], row["estimate"], "", row["note"], seeds_txt=seed_range(starts))
+        expert_sides = [flags[s]["side"] for s in starts]
+        for row in commitment(starts, args.commit_samples, load_policy, expert_sides):
+            rec(row["name"], row["estimate"], "", row["note"],
+                seeds_txt=f"first {len(starts)} two-way starts of {seed_range(seeds)} ({starts[0]}..{starts[-1]})")
     return 0
 
 

@@ -20,8 +20,9 @@ def chunk_sides(chunks: np.ndarray, state: np.ndarray, n_obs_steps: int) -> list
     return [path_side(np.concatenate([state[None, :2], c[n_obs_steps - 1:]]), state[2:5]) for c in np.asarray(chunks)]
 
 
-def commitment(starts: list[int], n_samples: int, load_policy) -> list[dict]:
-    """Rows {"name", "estimate", "note"} for the results table (see the module docstring)."""
+def commitment(starts: list[int], n_samples: int, load_policy, expert_sides: list[str]) -> list[dict]:
+    """Rows {"name", "estimate", "note"} for the results table (see the module docstring);
+    ``expert_sides``: the side of the expert's first travel leg from each start."""
     import torch
 
     from coursekit.data.features import get_features
@@ -53,6 +54,8 @@ def commitment(starts: list[int], n_samples: int, load_policy) -> list[dict]:
         print(f"  start {seed}: DP cw {cw} / ccw {ccw} / none {sides['dp'].count('none')} of {n_samples}; "
               f"regression {sides['reg'][0]}")
     dp_sides, reg_sides = np.asarray(dp_sides), np.asarray(reg_sides)
+    expert = np.asarray(expert_sides)
+    dp_with_expert = (dp_sides.reshape(len(starts), n_samples) == expert[:, None]).mean(1)  # (S,)
     base = f"{len(starts)} two-way starts (first ones among the evaluated seeds), reset observation; one training seed"
     return [
         {"name": "DP DDIM-10 chunks round neither side at a two-way start", "estimate": rate_estimate(dp_sides == "none"),
@@ -65,4 +68,8 @@ def commitment(starts: list[int], n_samples: int, load_policy) -> list[dict]:
         {"name": "regression chunk round neither side at a two-way start", "estimate": rate_estimate(reg_sides == "none"),
          "note": f"one deterministic chunk per start; cw {np.mean(reg_sides == 'cw'):.2f}, "
                  f"ccw {np.mean(reg_sides == 'ccw'):.2f}; {base}"},
+        {"name": "regression chunk goes the way the expert went at a two-way start",
+         "estimate": rate_estimate(reg_sides == expert),
+         "note": f"the expert's side is its seeded coin's; DP chunks going the expert's way: "
+                 f"{np.mean(dp_with_expert):.2f} of samples (mean over starts); {base}"},
     ]

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from coursekit.envs import pusht_geometry as geo
-from coursekit.evaluate.behaviour import rms_jerk, stalled_steps
+from coursekit.evaluate.behaviour import rms_jerk, stalled_steps, still_steps
 from coursekit.experts.pusht_clearance import local_to_world
 from coursekit.experts.pusht_two_ways import first_decision, path_side, path_sweep
 
@@ -101,3 +101,11 @@ def test_rms_jerk_is_the_third_difference():
     assert rms_jerk(noisy, length=np.array([20, 20]))[1] > 1.0
     with pytest.raises(ValueError, match="length"):
         rms_jerk(cubic, length=np.array([3]))
+
+
+def test_still_steps_counts_slow_pusher_steps_in_a_window():
+    s = _states_against_stem(10)
+    s[0, 6:, 0] += np.arange(1, 6) * 5.0  # still for 5 steps, then moves 5 px/step
+    assert still_steps(s, np.array([10])).tolist() == [5]
+    assert still_steps(s, np.array([10]), first=3).tolist() == [3]
+    assert still_steps(s, np.array([2])).tolist() == [2]

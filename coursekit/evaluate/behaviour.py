@@ -47,6 +47,23 @@ def stalled_steps(states: np.ndarray, length: np.ndarray, contact_gap: float = 3
     return (touching & still & block_still & valid).sum(axis=1)
 
 
+def still_steps(states: np.ndarray, length: np.ndarray, first: int | None = None, pusher_speed: float = 2.0) -> np.ndarray:
+    """Steps per episode (N,) in which the pusher moves less than ``pusher_speed`` px, anywhere
+    (touching the T or not), among the episode's first ``first`` steps (default: all it ran).
+
+    At a fork the paper's regressor would dither between the two routes before touching anything:
+    counted over the first few dozen steps this shows it (``stalled_steps`` only counts contact).
+    """
+    s = np.asarray(states, dtype=np.float64)
+    n = np.asarray(length)
+    if s.ndim != 3 or s.shape[-1] < 2 or n.shape != (s.shape[0],) or (n > s.shape[1] - 1).any():
+        raise ValueError(f"need states (N, T+1, >=2) and length (N,) <= T, got {s.shape} and {n.shape}")
+    speed = np.linalg.norm(np.diff(s[..., :2], axis=1), axis=-1)  # (N, T) px per step
+    t = np.arange(speed.shape[1])[None, :]
+    valid = (t < n[:, None]) & (t < (first if first is not None else speed.shape[1]))  # (N, T)
+    return ((speed < pusher_speed) & valid).sum(axis=1)
+
+
 def _pusher_in_block_frame(states: np.ndarray) -> np.ndarray:
     """Pusher centre (N, T, 2) in the T's body frame of the same row."""
     d = states[..., :2] - states[..., 2:4]  # (N, T, 2)
