@@ -283,6 +283,7 @@ def train(policy: Any, batches: Iterable[dict[str, Any]], config: TrainConfig, o
                 save_checkpoint(ema.model if ema else policy, out_dir, dataset_meta=dataset_meta,
                                 training={**summary(now - start), "complete": False})
                 last_ckpt = time.perf_counter()
+        bar.total = bar.n  # the budget is used up: end full and green (a time bar stops a second short)
     finally:
         bar.close()
         if config.num_threads is not None:

@@ -1,8 +1,15 @@
-"""Every course notebook: committed without outputs, and runs top to bottom through a real kernel.
+"""Every course notebook: committed clean, and runs top to bottom through a real kernel, twice.
 
-Notebooks run in fast mode (COURSEKIT_FAST=1) against the worked solutions
-(COURSEKIT_EXERCISES=solutions), as CI does. A meshcat server a notebook starts must not outlive
-its kernel.
+Notebooks run in fast mode (COURSEKIT_FAST=1) on the course's own kernel ("coursekit", which
+`make setup` installs inside .venv), in two passes:
+
+- "solutions": against the worked solutions (COURSEKIT_EXERCISES=solutions);
+- "exercises": as a student meets the course, against the untouched stubs in exercises/. Every
+  chapter must still run to the end without an error output, and every chapter that has an
+  exercise must show the "not implemented yet" banner of
+  :func:`coursekit.grading.exercise_or_reference`.
+
+A meshcat server a notebook starts must not outlive its kernel.
 """
 
 from __future__ import annotations
@@ -16,10 +23,18 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
 CELL_TIMEOUT_S = int(os.environ.get("COURSEKIT_NB_CELL_TIMEOUT", "600"))
+KERNEL = "coursekit"
+MODES = ("solutions", "exercises")
+# What `make setup` configures for the nbstripout git filter (keep the two lists in step).
+STRIP_EXTRA_KEYS = ["metadata.language_info", "metadata.jupytext", "metadata.toc", "cell.metadata.lines_to_next_cell"]
 
 
 def _ids(paths):
     return [p.stem for p in paths]
+
+
+def _chapter(path: Path) -> int:
+    return int(path.stem.split("_", 1)[0])
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=_ids(NOTEBOOKS))
@@ -27,7 +42,31 @@ def test_committed_without_outputs(path):
     nb = json.loads(path.read_text())
     dirty = [i for i, c in enumerate(nb["cells"]) if c["cell_type"] == "code" and (c.get("outputs") or c.get("execution_count"))]
     assert not dirty, f"{path.name}: cells {dirty} carry outputs; clear them before committing"
-    assert nb.get("metadata", {}).get("kernelspec", {}).get("name") == "python3", f"{path.name}: kernelspec must be python3"
+    assert nb.get("metadata", {}).get("kernelspec", {}).get("name") == KERNEL, f"{path.name}: kernelspec must be {KERNEL!r}"
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=_ids(NOTEBOOKS))
+def test_committed_as_the_git_filter_writes_them(path):
+    """`git status` stays clean after a Run All only if the filter maps the file to itself."""
+    import nbformat
+    from nbstripout import strip_output
+
+    text = path.read_text()
+    nb = strip_output(nbformat.reads(text, as_version=4), keep_output=False, keep_count=False, keep_id=True,
+                      extra_keys=STRIP_EXTRA_KEYS + ["metadata.signature", "metadata.widgets", "cell.metadata.collapsed",
+                                                     "cell.metadata.ExecuteTime", "cell.metadata.execution",
+                                                     "cell.metadata.scrolled"])
+    expected = nbformat.writes(nb)
+    expected += "" if expected.endswith("\n") else "\n"
+    assert expected == text, (f"{path.name} differs from what the nbstripout filter writes; "
+                                                "re-save it with nbformat.write (outputs and editor metadata stripped)")
+
+
+def test_makefile_installs_the_kernel_and_the_filter():
+    make = (ROOT / "Makefile").read_text()
+    assert f"--name $(KERNEL)" in make and f"KERNEL := {KERNEL}" in make and "--user --name python3" not in make
+    assert "nbstripout --install" in make and " ".join(STRIP_EXTRA_KEYS) in make
+    assert any(line.startswith("nbstripout==") for line in (ROOT / "environment.txt").read_text().splitlines())
 
 
 def _meshcat_servers() -> set[int]:
@@ -41,19 +80,23 @@ def _meshcat_servers() -> set[int]:
     return pids
 
 
-@pytest.mark.notebook
-@pytest.mark.parametrize("path", NOTEBOOKS, ids=_ids(NOTEBOOKS))
-def test_notebook_runs(path, monkeypatch):
+def run_notebook(path: Path, monkeypatch, mode: str, fast: bool = True, env: dict[str, str] | None = None):
+    """Execute ``path`` in a fresh "coursekit" kernel; returns the executed notebook."""
     import nbformat
     from nbclient import NotebookClient
 
-    monkeypatch.setenv("COURSEKIT_FAST", "1")
-    monkeypatch.setenv("COURSEKIT_EXERCISES", os.environ.get("COURSEKIT_EXERCISES", "solutions"))
+    if fast:
+        monkeypatch.setenv("COURSEKIT_FAST", "1")
+    else:
+        monkeypatch.delenv("COURSEKIT_FAST", raising=False)
+    monkeypatch.setenv("COURSEKIT_EXERCISES", mode)
     monkeypatch.setenv("MPLBACKEND", "module://matplotlib_inline.backend_inline")
     monkeypatch.setenv("MUJOCO_GL", os.environ.get("MUJOCO_GL", "egl"))
+    for key, value in (env or {}).items():
+        monkeypatch.setenv(key, value)
     before = _meshcat_servers()
     nb = nbformat.read(path, as_version=4)
-    client = NotebookClient(nb, timeout=CELL_TIMEOUT_S, kernel_name="python3",
+    client = NotebookClient(nb, timeout=CELL_TIMEOUT_S, kernel_name=KERNEL,
                             resources={"metadata": {"path": str(path.parent)}})
     client.execute()
     leaked = _meshcat_servers() - before
@@ -62,3 +105,35 @@ def test_notebook_runs(path, monkeypatch):
 
         psutil.Process(pid).kill()
     assert not leaked, f"{path.name} left meshcat server processes running: {sorted(leaked)}"
+    return nb
+
+
+def outputs_text(nb) -> str:
+    """All text a reader sees in the executed notebook's outputs (streams, text/plain, text/html)."""
+    parts = []
+    for cell in nb.cells:
+        for out in cell.get("outputs", []):
+            parts.append(out.get("text", ""))
+            data = out.get("data", {})
+            parts += [data.get("text/plain", ""), data.get("text/html", "")]
+    return "\n".join(p if isinstance(p, str) else "".join(p) for p in parts)
+
+
+@pytest.mark.notebook
+@pytest.mark.parametrize("mode", MODES)
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=_ids(NOTEBOOKS))
+def test_notebook_runs(path, mode, monkeypatch):
+    from coursekit.grading import EXERCISES
+    from coursekit.grading.fallback import BANNER_PREFIX
+    from coursekit.grading.registry import exercise_number
+
+    nb = run_notebook(path, monkeypatch, mode)
+    errors = [o for c in nb.cells for o in c.get("outputs", []) if o.get("output_type") == "error"]
+    assert not errors, f"{path.name} ({mode}): error outputs {[e.get('ename') for e in errors]}"
+    text = outputs_text(nb)
+    for exercise in (e for e in EXERCISES if e.chapter == _chapter(path)):
+        banner = f"exercise {exercise_number(exercise)} ({exercise.id}) {BANNER_PREFIX}"
+        if mode == "exercises":
+            assert banner in text, f"{path.name}: no banner for the unfinished exercise {exercise.id!r}"
+        else:
+            assert banner not in text and f"exercise {exercise_number(exercise)} ({exercise.id}): using your" in text
