@@ -7,12 +7,15 @@ Tp pusher targets [x, y] in world pixels (512 x 512, y down) that leave the push
 swing round one side of it and end above it.
 
 Diffusion works on normalised actions in [-1, 1] (the samplers' ``clip_sample`` range), so the
-chunks are min-max scaled by the world size: :func:`pixels_to_unit` and :func:`unit_to_pixels`.
+chunks are min-max scaled by the world size with the policies' own ``MinMaxNormalizer``:
+:func:`pixels_to_unit` and :func:`unit_to_pixels`.
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from coursekit.data.normalize import MinMaxNormalizer
 
 TWO_ROUTE_SCENE = (256.0, 440.0, 256.0, 250.0, 0.0)
 """The scene the routes go round: [agent_x, agent_y, block_x, block_y, block_angle] (pixels, rad)."""
@@ -50,15 +53,20 @@ def route_chunks(n: int, rng: np.random.Generator, horizon: int = 16, p_left: fl
     return chunks, side
 
 
+def world_normalizer() -> MinMaxNormalizer:
+    """The policies' min-max normaliser, fitted to the world: [0, WORLD_SIZE] -> [-1, 1] per axis."""
+    return MinMaxNormalizer(low=np.zeros(2), high=np.full(2, WORLD_SIZE))
+
+
 def pixels_to_unit(px):
     """World pixels (..., 2) -> a float32 torch tensor in [-1, 1] (the samplers' range)."""
     import torch
 
-    return torch.as_tensor(np.asarray(px) / WORLD_SIZE * 2.0 - 1.0, dtype=torch.float32)
+    return torch.as_tensor(world_normalizer().normalize(np.asarray(px, dtype=np.float64)), dtype=torch.float32)
 
 
 def unit_to_pixels(x) -> np.ndarray:
     """A tensor (or array) in [-1, 1] -> world pixels as a numpy array (detached, on the CPU)."""
     if hasattr(x, "detach"):
         x = x.detach().cpu().numpy()
-    return (np.asarray(x) + 1.0) / 2.0 * WORLD_SIZE
+    return world_normalizer().unnormalize(np.asarray(x, dtype=np.float64))
