@@ -69,19 +69,26 @@ def test_makefile_installs_the_kernel_and_the_filter():
     assert any(line.startswith("nbstripout==") for line in (ROOT / "environment.txt").read_text().splitlines())
 
 
-def _meshcat_servers() -> set[int]:
+def _meshcat_servers(run_id: str) -> set[int]:
+    """Meshcat servers started from this run's kernel: they inherit its COURSEKIT_NB_RUN_ID (so
+    servers of other programs on a shared machine are not blamed on the notebook)."""
     import psutil
 
     pids = set()
     for proc in psutil.process_iter(["pid", "cmdline"]):
         cmd = " ".join(proc.info.get("cmdline") or [])
         if "meshcat.servers" in cmd or "meshcat-server" in cmd:
-            pids.add(proc.info["pid"])
+            try:
+                if proc.environ().get("COURSEKIT_NB_RUN_ID") == run_id:
+                    pids.add(proc.info["pid"])
+            except (psutil.AccessDenied, psutil.NoSuchProcess, psutil.ZombieProcess):
+                continue
     return pids
 
 
-def run_notebook(path: Path, monkeypatch, mode: str, fast: bool = True, env: dict[str, str] | None = None):
-    """Execute ``path`` in a fresh "coursekit" kernel; returns the executed notebook."""
+def run_notebook(path: Path, monkeypatch, mode: str, fast: bool = True, env: dict[str, str] | None = None,
+                 extra_cells: tuple[str, ...] = ()):
+    """Execute ``path`` (plus ``extra_cells`` at the end) in a fresh "coursekit" kernel; returns the executed notebook."""
     import nbformat
     from nbclient import NotebookClient
 
@@ -94,12 +101,16 @@ def run_notebook(path: Path, monkeypatch, mode: str, fast: bool = True, env: dic
     monkeypatch.setenv("MUJOCO_GL", os.environ.get("MUJOCO_GL", "egl"))
     for key, value in (env or {}).items():
         monkeypatch.setenv(key, value)
-    before = _meshcat_servers()
+    import uuid
+
+    run_id = uuid.uuid4().hex
+    monkeypatch.setenv("COURSEKIT_NB_RUN_ID", run_id)
     nb = nbformat.read(path, as_version=4)
+    nb.cells += [nbformat.v4.new_code_cell(source) for source in extra_cells]
     client = NotebookClient(nb, timeout=CELL_TIMEOUT_S, kernel_name=KERNEL,
                             resources={"metadata": {"path": str(path.parent)}})
     client.execute()
-    leaked = _meshcat_servers() - before
+    leaked = _meshcat_servers(run_id)
     for pid in leaked:  # do not leave them running for the rest of the suite
         import psutil
 
@@ -137,3 +148,33 @@ def test_notebook_runs(path, mode, monkeypatch):
             assert banner in text, f"{path.name}: no banner for the unfinished exercise {exercise.id!r}"
         else:
             assert banner not in text and f"exercise {exercise_number(exercise)} ({exercise.id}): using your" in text
+
+
+@pytest.mark.notebook
+def test_chapter5_full_mode_evaluates_the_policy_it_just_trained(monkeypatch):
+    """Not fast mode, but a tiny budget: the freshly trained policy is evaluated beside the shipped one."""
+    path = ROOT / "notebooks" / "05_diffusion_policy_pusht.ipynb"
+    budget = {"demos": 4, "train_minutes": 0.1, "show_episodes": 1, "knob_episodes": 1, "knob_steps": 6,
+              "eval_episodes": 2, "max_steps": 12}
+    probe = ("import json as _json\n"
+             "print('PROBE' + _json.dumps({'fast': FAST, 'steps': result.summary['steps'],\n"
+             "      'trained_evaluated': [name for name, pol in contenders.items() if pol is result.policy],\n"
+             "      'shipped_evaluated': [name for name, pol in contenders.items() if pol is shipped_dp],\n"
+             "      'scored': list(scores)}))")
+    nb = run_notebook(path, monkeypatch, "solutions", fast=False, env={"COURSEKIT_NB_BUDGET": json.dumps(budget)},
+                      extra_cells=(probe,))
+    text = outputs_text(nb)
+    facts = json.loads(text.split("PROBE", 1)[1].splitlines()[0])
+    assert facts["fast"] is False and facts["steps"] > 0
+    trained = f"diffusion, trained here: {facts['steps']} steps"
+    assert len(facts["trained_evaluated"]) == 1 and facts["trained_evaluated"][0].startswith(trained)
+    assert facts["trained_evaluated"][0] in facts["scored"], "the trained policy was not scored in section 5.7"
+    from coursekit.checkpoint import find_checkpoint, training_budget
+
+    shipped = find_checkpoint("pusht_diffusion_state")
+    if shipped is not None:  # labelled with its whole training history, read from its config
+        b = training_budget(shipped)
+        assert facts["shipped_evaluated"] == [f"diffusion, shipped checkpoint: {b['steps']} steps, {b['minutes']:.0f} min "
+                                              f"(pusht_keypoints)"]
+    assert "using the shipped checkpoint" not in text
+
