@@ -25,8 +25,6 @@ NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
 CELL_TIMEOUT_S = int(os.environ.get("COURSEKIT_NB_CELL_TIMEOUT", "600"))
 KERNEL = "coursekit"
 MODES = ("solutions", "exercises")
-# What `make setup` configures for the nbstripout git filter (keep the two lists in step).
-STRIP_EXTRA_KEYS = ["metadata.language_info", "metadata.jupytext", "metadata.toc", "cell.metadata.lines_to_next_cell"]
 
 
 def _ids(paths):
@@ -47,16 +45,13 @@ def test_committed_without_outputs(path):
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=_ids(NOTEBOOKS))
 def test_committed_as_the_git_filter_writes_them(path):
-    """`git status` stays clean after a Run All only if the filter maps the file to itself."""
+    """`git status` stays clean after a Run All only if stripping maps the file to itself."""
     import nbformat
-    from nbstripout import strip_output
+
+    from coursekit.viz.notebook_save import strip_notebook
 
     text = path.read_text()
-    nb = strip_output(nbformat.reads(text, as_version=4), keep_output=False, keep_count=False, keep_id=True,
-                      extra_keys=STRIP_EXTRA_KEYS + ["metadata.signature", "metadata.widgets", "cell.metadata.collapsed",
-                                                     "cell.metadata.ExecuteTime", "cell.metadata.execution",
-                                                     "cell.metadata.scrolled"])
-    expected = nbformat.writes(nb)
+    expected = nbformat.writes(strip_notebook(nbformat.reads(text, as_version=4)))
     expected += "" if expected.endswith("\n") else "\n"
     assert expected == text, (f"{path.name} differs from what the nbstripout filter writes; "
                                                 "re-save it with nbformat.write (outputs and editor metadata stripped)")
@@ -65,7 +60,10 @@ def test_committed_as_the_git_filter_writes_them(path):
 def test_makefile_installs_the_kernel_and_the_filter():
     make = (ROOT / "Makefile").read_text()
     assert f"--name $(KERNEL)" in make and f"KERNEL := {KERNEL}" in make and "--user --name python3" not in make
+    from coursekit.viz.notebook_save import STRIP_EXTRA_KEYS
+
     assert "nbstripout --install" in make and " ".join(STRIP_EXTRA_KEYS) in make
+    assert "--ContentsManager.pre_save_hook=coursekit.viz.notebook_save.strip_before_save" in make
     assert any(line.startswith("nbstripout==") for line in (ROOT / "environment.txt").read_text().splitlines())
 
 
@@ -178,3 +176,32 @@ def test_chapter5_full_mode_evaluates_the_policy_it_just_trained(monkeypatch):
                                               f"(pusht_keypoints)"]
     assert "using the shipped checkpoint" not in text
 
+
+
+def test_lab_saves_a_run_notebook_as_committed():
+    """JupyterLab's save of a notebook after Run All (outputs, counts, editor metadata) goes through
+    the pre-save hook of `make lab` and comes out byte for byte as committed: `git status` stays clean."""
+    import nbformat
+    from jupyter_server.services.contents.filemanager import FileContentsManager
+    from traitlets.config import Config
+
+    import tempfile
+
+    path = ROOT / "notebooks" / "02_noise_prediction_loss.ipynb"
+    committed = path.read_text()
+    nb = nbformat.reads(committed, as_version=4)
+    nb.metadata["language_info"] = {"name": "python", "version": "3.11.7"}
+    nb.metadata["widgets"] = {"application/vnd.jupyter.widget-state+json": {"state": {}}}
+    for i, cell in enumerate(c for c in nb.cells if c.cell_type == "code"):
+        cell.execution_count = i + 1
+        cell.outputs = [nbformat.v4.new_output("stream", name="stdout", text="x" * 1000)]
+        cell.metadata["execution"] = {"iopub.status.busy": "2026-12-01T00:00:00Z"}
+        cell.metadata["scrolled"] = True
+    config = Config()
+    config.ContentsManager.pre_save_hook = "coursekit.viz.notebook_save.strip_before_save"
+    with tempfile.TemporaryDirectory() as tmp:
+        manager = FileContentsManager(root_dir=tmp, config=config)
+        manager.save({"type": "notebook", "format": "json", "content": nb}, path.name)
+        assert (Path(tmp) / path.name).read_text() == committed
+        manager.save({"type": "notebook", "format": "json", "content": nb}, "my_notes.ipynb")  # not a course notebook
+        assert "xxxx" in (Path(tmp) / "my_notes.ipynb").read_text()
