@@ -107,7 +107,13 @@ def run_notebook(path: Path, monkeypatch, mode: str, fast: bool = True, env: dic
     nb.cells += [nbformat.v4.new_code_cell(source) for source in extra_cells]
     client = NotebookClient(nb, timeout=CELL_TIMEOUT_S, kernel_name=KERNEL,
                             resources={"metadata": {"path": str(path.parent)}})
-    client.execute()
+    try:
+        client.execute()
+    finally:  # COURSEKIT_NB_OUTPUT_DIR: keep the executed notebook to look at (e.g. a CI artifact)
+        if os.environ.get("COURSEKIT_NB_OUTPUT_DIR"):
+            out = Path(os.environ["COURSEKIT_NB_OUTPUT_DIR"])
+            out.mkdir(parents=True, exist_ok=True)
+            nbformat.write(nb, out / f"{path.stem}-{mode}{'' if fast else '-full'}.ipynb")
     leaked = _meshcat_servers(run_id)
     for pid in leaked:  # do not leave them running for the rest of the suite
         import psutil
