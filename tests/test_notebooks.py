@@ -136,7 +136,7 @@ def outputs_text(nb) -> str:
 
 def _uses_exercises(path: Path) -> bool:
     text = path.read_text()
-    return any(word in text for word in ("exercise_or_reference", "load_exercise", "coursekit.check", "COURSEKIT_EXERCISES"))
+    return any(word in text for word in ("exercise_or_reference", "load_exercise", "coursekit.check(", "COURSEKIT_EXERCISES"))
 
 
 @pytest.mark.notebook
