@@ -41,7 +41,6 @@ def lazy_loader(package: str, table: Mapping[str, str], submodules: bool = False
         return value
 
     def __dir__() -> list[str]:
-        public = (n for n in vars(sys.modules[package]) if not n.startswith("_"))
-        return sorted(set(names).union(public))
+        return sorted(set(names).union(getattr(sys.modules[package], "__all__", ())))
 
     return __getattr__, __dir__

@@ -246,3 +246,25 @@ def test_cli_init_from_continues_from_the_checkpoint_weights(tmp_path, capsys):
     assert "unet" in capsys.readouterr().err and not bad.exists()
     assert main(["train", "--steps", "1", "--policy", "regression", "--init-from", str(first), "--out", str(bad), *common]) == 2
     assert "'diffusion' policy, expected 'regression'" in capsys.readouterr().err and not bad.exists()
+
+
+def test_callbacks_get_log_records_and_the_final_policy_and_train_writes_nothing(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    ds = synthetic_pusht()
+    policy, batches, _ = make_policy("regression", ds, batch_size=8, unet=TINY)
+    logged, saved = [], []
+
+    class Spy:
+        def on_log(self, record):
+            logged.append(dict(record))
+
+        def on_checkpoint(self, pol, summary):
+            saved.append((pol, dict(summary)))
+
+    cfg = TrainConfig(max_steps=5, warmup_steps=0, log_every=2, progress=False, ema=False)
+    result = train(policy, batches, cfg, callbacks=[Spy(), object()])  # a callback may define only some hooks
+    assert [r["step"] for r in logged] == [2, 4, 5]
+    assert all(set(r) == {"step", "loss", "lr", "samples_per_s", "wall_s"} for r in logged)
+    assert logged[-1]["loss"] == pytest.approx(result.history[-1]["loss"])
+    assert len(saved) == 1 and saved[0][0] is result.policy and saved[0][1]["complete"] and saved[0][1]["steps"] == 5
+    assert list(tmp_path.iterdir()) == []
