@@ -27,6 +27,10 @@ def test_every_row_has_the_schema():
             assert lo <= entry["value"] <= hi, f"{key}: interval {entry['interval']} misses {entry['value']}"
         if "n" in entry:
             assert isinstance(entry["n"], int) and entry["n"] > 0, key
+        if entry["section"].startswith(("Claims", "Chunk ablation")):  # issue 16: every claim with its evidence
+            assert {"interval", "n", "seeds"} <= set(entry), f"{key}: a claims row needs interval, n and seeds"
+            learned = "clean expert" not in entry["note"]  # the expert's own statistics have no training seed
+            assert not learned or "training seed" in entry["note"], f"{key}: say how many training seeds are behind it"
 
 
 def test_readme_table_is_rendered_from_results_json():
