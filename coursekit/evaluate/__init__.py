@@ -5,6 +5,7 @@
     pusht.py     PushTAdapter, evaluate_pusht (Diffusion Policy's mean-of-max protocol)
     aloha.py     ArmPairAdapter, evaluate_aloha (ACT's stage rates + strict final-state success)
     tasks.py     TASKS, make_adapter(task, policy), task_of(policy, dataset_meta)
+    behaviour.py stalled_steps / still_steps (PushT hesitation), rms_jerk (smoothness of executed actions)
 """
 
 from __future__ import annotations
@@ -27,6 +28,9 @@ _LAZY = {
     "STATE_COLUMNS": "coursekit.evaluate.aloha",
     "TASKS": "coursekit.evaluate.tasks",
     "make_adapter": "coursekit.evaluate.tasks",
+    "stalled_steps": "coursekit.evaluate.behaviour",
+    "still_steps": "coursekit.evaluate.behaviour",
+    "rms_jerk": "coursekit.evaluate.behaviour",
 }
 __all__ = sorted(_LAZY)
 __getattr__, __dir__ = lazy_loader(__name__, _LAZY)
