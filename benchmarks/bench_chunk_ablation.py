@@ -43,6 +43,9 @@ VARIANTS = {
     "Diffusion Policy DDIM-10 (To=2, Tp=16, Ta=8)": ("diffusion", {}, {"sampler": "ddim", "num_inference_steps": 10}),
 }
 """name -> (policy type, config fields, sampling). Single-step needs a one-level U-Net (Tp = 1 cannot be halved)."""
+SHIPPED = {"diffusion": ("pusht_diffusion_state", "shipped DP DDIM-10", "dp_ddim10", {"sampler": "ddim", "num_inference_steps": 10}),
+           "regression": ("pusht_regression_state", "shipped chunked regression", "regression", {})}
+"""--policy of part ta -> (checkpoint, row label, bench_claims file tag, sampling)."""
 
 
 def seed_text(seeds: list[int]) -> str:
@@ -69,23 +72,25 @@ def part_ta(args, seeds: list[int], rec) -> None:
     from coursekit.checkpoint import find_checkpoint, load_checkpoint, read_checkpoint_info
     from coursekit.stats import mean_estimate, rate_estimate
 
-    path = find_checkpoint("pusht_diffusion_state")
+    ckpt, label, tag, sampling = SHIPPED[args.policy]
+    prefix = "" if args.policy == "diffusion" else f"{args.policy}_"
+    path = find_checkpoint(ckpt)
     dp, meta = load_checkpoint(path, device="cpu"), read_checkpoint_info(path)["dataset"]
     for ta in args.ta:
         policy = dp.with_config(n_action_steps=int(ta))  # validated copy: To - 1 + Ta <= Tp
-        claims = ROOT / "outputs" / "bench_claims" / f"eval_dp_ddim10_{seeds[0]}_{len(seeds)}.npz"
+        claims = ROOT / "outputs" / "bench_claims" / f"eval_{tag}_{seeds[0]}_{len(seeds)}.npz"
         if ta == dp.config.n_action_steps and claims.exists():  # the same evaluation, made by bench_claims
             data = np.load(claims)
             if data["seeds"].tolist() == seeds:
-                out = args.out / f"ta{ta}_{seeds[0]}_{len(seeds)}.json"
+                out = args.out / f"{prefix}ta{ta}_{seeds[0]}_{len(seeds)}.json"
                 out.write_text(json.dumps({"seeds": seeds, "max_reward": data["max_reward"].tolist(),
                                            "success": data["success"].tolist(), "seconds": float(data["seconds"]),
                                            "from": str(claims.relative_to(ROOT))}) + "\n")
-        saved = evaluate_saved(policy, args.out / f"ta{ta}_{seeds[0]}_{len(seeds)}.json", seeds, meta,
-                               {"sampler": "ddim", "num_inference_steps": 10})
+        saved = evaluate_saved(policy, args.out / f"{prefix}ta{ta}_{seeds[0]}_{len(seeds)}.json", seeds, meta, sampling)
         score, ok = mean_estimate(saved["max_reward"]), rate_estimate(np.asarray(saved["success"], dtype=bool))
-        rec(f"shipped DP DDIM-10 score, Ta={ta}", score,
-            f"success {ok}; To=2, Tp=16; shipped checkpoint, one training seed; {saved['seconds']:.0f} s to evaluate")
+        rec(f"{label} score, Ta={ta}", score,
+            f"success {ok}; To={policy.config.n_obs_steps}, Tp={policy.config.horizon}; shipped checkpoint, one "
+            f"training seed; {saved['seconds']:.0f} s to evaluate")
 
 
 def part_train(args, seeds: list[int], rec) -> None:
@@ -137,6 +142,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--only", choices=("ta", "train"), default="ta", help="ta: the shipped DP vs Ta; train: the multi-seed ablation")
     parser.add_argument("--episodes", type=int, default=200)
     parser.add_argument("--seed-start", type=int, default=100_000, help="protocol 100000, validation 200000")
+    parser.add_argument("--policy", choices=sorted(SHIPPED), default="diffusion", help="shipped checkpoint (part ta)")
     parser.add_argument("--ta", type=int, nargs="+", default=[15, 8, 4, 2, 1], help="Ta values (part ta)")
     parser.add_argument("--train-seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--variants", nargs="+", default=[], help="substrings of variant names to run (default all)")
@@ -158,7 +164,7 @@ def main(argv: list[str] | None = None) -> int:
     seeds = list(range(args.seed_start, args.seed_start + args.episodes))
     args.out.mkdir(parents=True, exist_ok=True)
     cmd = f".venv/bin/python -m benchmarks.bench_chunk_ablation --only {args.only} --episodes {args.episodes} " \
-          f"--seed-start {args.seed_start} --threads {args.threads}"
+          f"--seed-start {args.seed_start} --threads {args.threads}" + (f" --policy {args.policy}" if args.only == "ta" else "")
     if args.only == "train":
         cmd += f" --train-seeds {' '.join(map(str, args.train_seeds))} " + (f"--steps {args.steps}" if args.steps
                                                                              else f"--minutes {args.minutes:g}")
