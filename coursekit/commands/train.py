@@ -24,8 +24,8 @@ HELP = "train a chunk policy (diffusion, regression baseline or act) on demonstr
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--policy", choices=["diffusion", "regression", "act"], default="diffusion",
-                        help="policy head (default: diffusion; act = ACT, the transformer CVAE)")
+    parser.add_argument("--policy", choices=["diffusion", "regression", "act", "flow"], default="diffusion",
+                        help="policy head (default: diffusion; act = ACT, the transformer CVAE; flow = flow matching)")
     parser.add_argument("--data", type=Path, required=True, help="demonstrations .npz (from `coursekit collect ...`)")
     parser.add_argument("--out", type=Path, required=True, help="checkpoint directory to write (model.safetensors + config.json)")
     parser.add_argument("--minutes", type=float, default=None, help="wall-clock training budget in minutes")

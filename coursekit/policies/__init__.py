@@ -1,4 +1,4 @@
-"""Chunk policies: Diffusion Policy, the regression baseline, ACT; and the type registry.
+"""Chunk policies: Diffusion Policy, the regression baseline, ACT, flow matching; and the type registry.
 
 Every policy follows the contract in :mod:`coursekit.policies.base`. ``POLICY_TYPES`` maps the
 ``policy_type`` stored in a checkpoint to its class (as a "module:Class" string, imported on
@@ -15,6 +15,7 @@ POLICY_TYPES: dict[str, str] = {
     "diffusion": "coursekit.policies.diffusion:DiffusionPolicy",
     "regression": "coursekit.policies.regression:RegressionPolicy",
     "act": "coursekit.policies.act:ACTPolicy",
+    "flow": "coursekit.policies.flow:FlowMatchingPolicy",
 }
 
 _LAZY = {
@@ -25,6 +26,8 @@ _LAZY = {
     "RegressionPolicyConfig": "coursekit.policies.regression:RegressionPolicyConfig",
     "ACTPolicy": "coursekit.policies.act:ACTPolicy",
     "ACTConfig": "coursekit.policies.act:ACTConfig",
+    "FlowMatchingPolicy": "coursekit.policies.flow:FlowMatchingPolicy",
+    "FlowMatchingPolicyConfig": "coursekit.policies.flow:FlowMatchingPolicyConfig",
 }
 __all__ = sorted(_LAZY) + ["POLICY_TYPES", "get_policy_class"]
 
@@ -35,7 +38,7 @@ def _resolve(target: str) -> Any:
 
 
 def get_policy_class(policy_type: str) -> type:
-    """The class registered for ``policy_type`` ('diffusion', 'regression', 'act')."""
+    """The class registered for ``policy_type`` ('diffusion', 'regression', 'act', 'flow')."""
     if policy_type not in POLICY_TYPES:
         raise ValueError(f"unknown policy type {policy_type!r}; expected one of {sorted(POLICY_TYPES)}")
     return _resolve(POLICY_TYPES[policy_type])

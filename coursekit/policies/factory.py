@@ -17,11 +17,11 @@ import torch
 from coursekit.data.batches import WindowBatcher, pusht_training_arrays
 from coursekit.data.episodes import EpisodeDataset
 
-UNET_POLICIES = ("diffusion", "regression")
+UNET_POLICIES = ("diffusion", "regression", "flow")
 
 
 def make_unet_config(policy_type: str, **kwargs: Any) -> Any:
-    """The config dataclass of 'diffusion' or 'regression' from keyword fields."""
+    """The config dataclass of 'diffusion', 'regression' or 'flow' from keyword fields."""
     if policy_type == "diffusion":
         from coursekit.policies.diffusion import DiffusionPolicyConfig
 
@@ -30,6 +30,10 @@ def make_unet_config(policy_type: str, **kwargs: Any) -> Any:
         from coursekit.policies.regression import RegressionPolicyConfig
 
         return RegressionPolicyConfig(**kwargs)
+    if policy_type == "flow":
+        from coursekit.policies.flow import FlowMatchingPolicyConfig
+
+        return FlowMatchingPolicyConfig(**kwargs)
     raise ValueError(f"policy_type must be one of {UNET_POLICIES}, got {policy_type!r}")
 
 
@@ -58,7 +62,7 @@ def make_pusht_policy(policy_type: str, dataset: EpisodeDataset, features: str =
     """A fresh policy (weights seeded by ``seed``, normalisers fitted) and its seeded batcher.
 
     Args:
-        policy_type: 'diffusion' or 'regression'.
+        policy_type: 'diffusion', 'regression' or 'flow'.
         dataset: PushT demonstrations with "state" (N, 5) and "action" (N, 2).
         features: 'pusht_state', 'pusht_keypoints' (low-dim) or 'pusht_image'.
         batch_size, seed, device: of the batcher (and the weight initialisation).
