@@ -1,63 +1,210 @@
-"""Flow matching vs Diffusion Policy on PushT: score vs integration steps, and chunk latency.
+"""Flow matching vs Diffusion Policy on PushT: score against integration steps, and chunk latency.
 
-(Work in progress: the evaluation cache is written first so the long evaluations can start.)
+Run: ``.venv/bin/python -m benchmarks.bench_flow`` (about 10 minutes on one thread of a quiet
+2-core machine). Parts (``--only``):
+
+- ``score``: the shipped flow checkpoint (``coursekit/checkpoints/pusht_flow_state``) with 1, 2,
+  4 and 10 Euler steps and the shipped Diffusion Policy with DDIM-10, all on the SAME
+  ``--episodes`` (default 200) held-out seeds 100000.. and the same sampling seed 0, 300 steps,
+  the paper's protocol (mean of max coverage reward; success = coverage > 95 %). 95 % intervals:
+  Wilson for success rates, a seeded percentile bootstrap (10,000 resamples of the seeds) for
+  mean scores and for the paired difference flow Euler-4 minus DP DDIM-10 (paired: same seeds).
+  Each evaluation is cached in ``--out`` as JSON (per-episode max reward and success) and reused
+  when the checkpoint file and seeds are unchanged (``--fresh`` re-runs them).
+- ``latency``: one chunk at batch 1 (B=1, To observations), median over ``--repeats`` rounds in
+  which flow 1/2/4/10 Euler steps, DP DDIM-10 and ACT (``act_pusht``, one pass with z = 0) take
+  turns, so that a shared machine's load hits all alike.
+- ``shipped``: the flow checkpoint's own default (Euler-10) on 50 seeds, the row
+  ``tests/test_shipped_checkpoints.py`` reproduces through ``coursekit eval``.
+
+Both checkpoints were trained on the same 400 demonstrations (seeds 0..399, DART noise 0/5 px,
+keypoint features), recipe ``cpu`` (lr 5e-4, batch 128), training seed 0; their step counts are
+read from the checkpoints and written into every row. Every figure goes through
+``benchmarks.results.record(section="Flow matching", ...)``.
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
+import math
+import os
+import statistics
 import time
 from pathlib import Path
 
 import numpy as np
 import torch
 
+from benchmarks.results import record
 from coursekit.checkpoint import load_checkpoint, read_checkpoint_info
 from coursekit.evaluate import evaluate_pusht, heldout_seeds
 from coursekit.io import atomic_write_text
 
+COMMAND = ".venv/bin/python -m benchmarks.bench_flow"
+SECTION = "Flow matching"
 ROOT = Path(__file__).resolve().parent.parent
 CKPT = {"flow": ROOT / "coursekit" / "checkpoints" / "pusht_flow_state",
         "diffusion": ROOT / "coursekit" / "checkpoints" / "pusht_diffusion_state",
         "act": ROOT / "coursekit" / "checkpoints" / "act_pusht"}
+FLOW_STEPS = (1, 2, 4, 10)
+
+
+def wilson(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:
+    """Wilson score interval of a binomial proportion (95 % by default)."""
+    if n < 1:
+        raise ValueError(f"need n >= 1 episodes, got {n}")
+    p = successes / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def bootstrap_mean(values: np.ndarray, n_boot: int = 10000, seed: int = 0) -> tuple[float, float]:
+    """95 % percentile-bootstrap interval of the mean of ``values`` (N,) (or of paired differences)."""
+    rng = np.random.default_rng(seed)
+    idx = rng.integers(0, len(values), size=(n_boot, len(values)))  # (n_boot, N) resampled seeds
+    means = values[idx].mean(axis=1)
+    return float(np.percentile(means, 2.5)), float(np.percentile(means, 97.5))
+
+
+def _weights_hash(checkpoint: Path) -> str:
+    return hashlib.sha256((checkpoint / "model.safetensors").read_bytes()).hexdigest()[:16]
 
 
 def evaluate_cached(checkpoint: Path, sampler: str, steps: int, seeds: list[int], cache: Path,
                     reuse: bool = True) -> dict:
-    """Per-episode max reward and success of one (checkpoint, sampler, steps) on ``seeds``; cached as JSON."""
+    """Per-episode max reward and success of (checkpoint, sampler, steps) on ``seeds``; cached as JSON."""
+    key = {"checkpoint": str(checkpoint), "weights": _weights_hash(checkpoint), "sampler": sampler,
+           "steps": steps, "seeds": list(seeds)}
     if reuse and cache.is_file():
         data = json.loads(cache.read_text())
-        if data["seeds"] == list(seeds) and data["checkpoint"] == str(checkpoint):
+        if all(data.get(k) == v for k, v in key.items()):
             return data
     info = read_checkpoint_info(checkpoint)
     policy = load_checkpoint(checkpoint, device="cpu")
     t0 = time.perf_counter()
     r = evaluate_pusht(policy, seeds=seeds, sampler=sampler, num_inference_steps=steps,
                        dataset_meta=info.get("dataset"), progress=False)
-    data = {"checkpoint": str(checkpoint), "sampler": sampler, "steps": steps, "seeds": list(seeds),
-            "max_reward": [float(v) for v in np.asarray(r.max_reward)], "success": [bool(v) for v in np.asarray(r.success)],
-            "seconds": time.perf_counter() - t0, "ms_per_chunk": r.ms_per_chunk, "torch_threads": torch.get_num_threads()}
+    data = {**key, "max_reward": [float(v) for v in np.asarray(r.max_reward)],
+            "success": [bool(v) for v in np.asarray(r.success)], "seconds": round(time.perf_counter() - t0, 1),
+            "torch_threads": torch.get_num_threads()}
     cache.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_text(cache, json.dumps(data) + "\n")
     return data
 
 
+def training_note(checkpoint: Path) -> str:
+    """'<steps> steps (<a> + <b> warm-started), batch B, lr L, seed S' from the checkpoint's summary."""
+    t = read_checkpoint_info(checkpoint)["training"]
+    prior = t.get("init_from") or {}
+    cfg = t["train_config"]
+    total = t["steps"] + (prior.get("steps") or 0)
+    parts = f" ({prior['steps']} + {t['steps']}, warm-started)" if prior.get("steps") else ""
+    return f"{total} steps{parts}, batch {cfg['batch_size']}, lr {cfg['lr']:g}, seed {cfg['seed']}"
+
+
+def part_score(args: argparse.Namespace, rec) -> None:
+    seeds = heldout_seeds(args.episodes)
+    variants = [("flow", "euler", n) for n in FLOW_STEPS] + [("diffusion", "ddim", 10)]
+    res = {}
+    for kind, sampler, n in variants:
+        d = evaluate_cached(CKPT[kind], sampler, n, seeds, args.out / f"eval_{kind}_{sampler}{n}_{args.episodes}.json",
+                            reuse=not args.fresh)
+        res[(kind, n)] = d
+        print(f"{kind:9s} {sampler}-{n:<2d}: score {np.mean(d['max_reward']):.3f}, success {np.mean(d['success']):.0%} "
+              f"({d['seconds']:.0f} s on {d['torch_threads']} thread(s))")
+    trained = f"flow trained {training_note(CKPT['flow'])}; DP trained {training_note(CKPT['diffusion'])}"
+    common = (f"{args.episodes} held-out seeds {seeds[0]}..{seeds[-1]} (the same for every row), sampling seed 0, "
+              f"300 steps; 400 demos (DART 0/5 px), keypoint features, U-Net 64/128/256, recipe cpu; {trained}")
+    for (kind, n), d in res.items():
+        r, s = np.asarray(d["max_reward"]), np.asarray(d["success"])
+        lo, hi = bootstrap_mean(r)
+        slo, shi = wilson(int(s.sum()), len(s))
+        label = f"flow matching score, Euler-{n}" if kind == "flow" else "DP score, DDIM-10 (same seeds as flow)"
+        rec(SECTION, label, round(float(r.mean()), 3), "", f"{COMMAND} --only score",
+            target=">= DP DDIM-10 - 0.03" if (kind, n) == ("flow", 4) else "",
+            note=f"95 % CI {lo:.3f}-{hi:.3f} (bootstrap); success {s.mean():.1%} (Wilson 95 % {slo:.1%}-{shi:.1%}); "
+                 f"{n} U-Net calls per chunk; {common}")
+    diff = np.asarray(res[("flow", 4)]["max_reward"]) - np.asarray(res[("diffusion", 10)]["max_reward"])
+    lo, hi = bootstrap_mean(diff)
+    print(f"flow Euler-4 minus DP DDIM-10: {diff.mean():+.3f} (95 % CI {lo:+.3f} .. {hi:+.3f}, paired)")
+    rec(SECTION, "flow Euler-4 minus DP DDIM-10 score", round(float(diff.mean()), 3), "", f"{COMMAND} --only score",
+        target=">= -0.03", note=f"paired over seeds, 95 % CI {lo:+.3f} to {hi:+.3f} (bootstrap); {common}")
+
+
+def _chunk_call(policy, kind: str, n: int | None):
+    c = policy.config
+    obs = torch.zeros(1, c.n_obs_steps, c.obs_dim)  # (B=1, To, Do)
+    g = torch.Generator().manual_seed(0)
+    if kind == "act":
+        return lambda: policy.predict_chunk(obs)
+    sampler = "euler" if kind == "flow" else "ddim"
+    return lambda: policy.predict_chunk(obs, sampler=sampler, num_inference_steps=n, generator=g)
+
+
+def part_latency(args: argparse.Namespace, rec) -> None:
+    policies = {k: load_checkpoint(CKPT[k], device="cpu") for k in ("flow", "diffusion", "act")}
+    calls = {f"flow Euler-{n}": _chunk_call(policies["flow"], "flow", n) for n in FLOW_STEPS}
+    calls["DP DDIM-10"] = _chunk_call(policies["diffusion"], "diffusion", 10)
+    calls["ACT (one pass, z = 0)"] = _chunk_call(policies["act"], "act", None)
+    times: dict[str, list[float]] = {k: [] for k in calls}
+    load = os.getloadavg()[0]
+    with torch.no_grad():
+        for fn in calls.values():  # warm-up
+            fn()
+        for _ in range(args.repeats):  # take turns: the machine's load hits every variant alike
+            for name, fn in calls.items():
+                t0 = time.perf_counter()
+                fn()
+                times[name].append(1e3 * (time.perf_counter() - t0))
+    med = {k: statistics.median(v) for k, v in times.items()}
+    for k, v in med.items():
+        print(f"{k:24s} {v:7.1f} ms per chunk (median of {args.repeats}; min {min(times[k]):.1f})")
+    ratio = med["DP DDIM-10"] / med["flow Euler-4"]
+    print(f"DDIM-10 / flow Euler-4 latency: {ratio:.2f}x")
+    note = (f"batch 1, one chunk (Tp=16 for DP/flow, k=20 for ACT), median of {args.repeats} rounds taking turns, "
+            f"{torch.get_num_threads()} torch thread(s), 1-min load average {load:.1f} on {os.cpu_count()} cores at start")
+    for k, v in med.items():
+        rec(SECTION, f"chunk latency, {k}", round(v, 1), "ms", f"{COMMAND} --only latency", note=note)
+    rec(SECTION, "latency ratio DP DDIM-10 / flow Euler-4", round(ratio, 2), "x", f"{COMMAND} --only latency",
+        target=">= 2x", note="same run; " + note)
+
+
+def part_shipped(args: argparse.Namespace, rec) -> None:
+    seeds = heldout_seeds(50)
+    d = evaluate_cached(CKPT["flow"], None, None, seeds, args.out / "eval_flow_default_50.json", reuse=not args.fresh)
+    r = np.asarray(d["max_reward"])
+    print(f"shipped flow (its default, Euler-10), 50 seeds: score {r.mean():.3f}, success {np.mean(d['success']):.0%}")
+    rec(SECTION, "shipped flow checkpoint score, Euler-10 (notebook 10)", round(float(r.mean()), 3), "",
+        f"{COMMAND} --only shipped",
+        note=f"success {np.mean(d['success']):.0%}; stderr {r.std(ddof=1) / math.sqrt(len(r)):.3f}; 50 held-out seeds "
+             f"from 100000, 300 steps, the checkpoint's default sampler; trained {training_note(CKPT['flow'])} "
+             f"(float16 weights); evaluated with {d['torch_threads']} torch thread(s)")
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--eval-one", nargs=2, metavar=("POLICY", "SAMPLER:STEPS"), default=None)
-    parser.add_argument("--episodes", type=int, default=200)
-    parser.add_argument("--threads", type=int, default=1)
-    parser.add_argument("--out", type=Path, default=ROOT / "outputs" / "bench_flow")
+    parser.add_argument("--only", choices=["score", "latency", "shipped"], default=None, help="run one part")
+    parser.add_argument("--episodes", type=int, default=200, help="held-out episodes for the score part (default 200)")
+    parser.add_argument("--repeats", type=int, default=30, help="latency rounds (default 30)")
+    parser.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
+    parser.add_argument("--out", type=Path, default=ROOT / "outputs" / "bench_flow", help="evaluation cache directory")
+    parser.add_argument("--fresh", action="store_true", help="re-run evaluations even if cached")
+    parser.add_argument("--no-record", action="store_true", help="print only, do not write results.json")
     args = parser.parse_args(argv)
+    if args.episodes < 2 or args.repeats < 1 or args.threads < 1:
+        raise SystemExit(f"need --episodes >= 2, --repeats >= 1, --threads >= 1; got {args.episodes}, "
+                         f"{args.repeats}, {args.threads}")
     torch.set_num_threads(args.threads)
-    seeds = heldout_seeds(args.episodes)
-    if args.eval_one:
-        kind, spec = args.eval_one
-        sampler, steps = spec.split(":")
-        d = evaluate_cached(CKPT[kind], sampler, int(steps), seeds, args.out / f"eval_{kind}_{sampler}{steps}_{args.episodes}.json")
-        print(f"{kind} {sampler}-{steps}: score {np.mean(d['max_reward']):.3f} success {np.mean(d['success']):.2f} "
-              f"in {d['seconds']:.0f} s")
+    rec = (lambda *a, **k: None) if args.no_record else record  # noqa: E731
+    missing = [str(p) for p in CKPT.values() if not (p / "config.json").is_file()]
+    if missing:
+        raise SystemExit(f"missing checkpoints: {missing}")
+    for name, part in (("score", part_score), ("latency", part_latency), ("shipped", part_shipped)):
+        if args.only in (None, name):
+            part(args, rec)
 
 
 if __name__ == "__main__":

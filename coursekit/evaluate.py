@@ -251,4 +251,6 @@ def evaluate_pusht(policy: Any, n_episodes: int = 50, seeds: Sequence[int] | Non
         used = policy.make_sampler(sampler, num_inference_steps)
         result.info.update({"sampler": sampler or c.sampler, "num_inference_steps": len(used.timesteps),
                             "first_timestep": int(used.timesteps[0])})
+    elif hasattr(policy, "integration_info"):  # flow matching: which integrator and how many steps
+        result.info.update(policy.integration_info(sampler, num_inference_steps))
     return result

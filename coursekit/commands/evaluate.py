@@ -19,8 +19,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--episodes", type=int, default=50, help="held-out episodes (default 50)")
     parser.add_argument("--seed-start", type=int, default=None, help="first reset seed (default 100000; episode i uses start + i)")
     parser.add_argument("--max-steps", type=int, default=None, help="steps per episode (default 300 PushT, 400 ALOHA)")
-    parser.add_argument("--sampler", choices=["ddim", "ddpm"], default=None, help="diffusion sampler (default: the checkpoint's)")
-    parser.add_argument("--steps", type=int, default=None, help="denoising steps (default: 10 for DDIM, 100 for DDPM)")
+    parser.add_argument("--sampler", choices=["ddim", "ddpm", "euler", "midpoint"], default=None,
+                        help="sampler (default: the checkpoint's): ddim/ddpm for diffusion, euler/midpoint for flow")
+    parser.add_argument("--steps", type=int, default=None,
+                        help="denoising / integration steps (default: 10 for DDIM and flow, 100 for DDPM)")
     parser.add_argument("--ddim-spacing", choices=["leading", "trailing"], default=None,
                         help="DDIM timesteps: leading (90, 80, ..., 0) or trailing (99, 89, ..., 9) (default: the checkpoint's)")
     parser.add_argument("--n-action-steps", type=int, default=None, help="override Ta, actions executed per chunk")
@@ -49,6 +51,11 @@ def run(args: argparse.Namespace) -> int:
     policy = load_checkpoint(args.checkpoint, device=args.device)
     seeds = heldout_seeds(args.episodes, EVAL_SEED_START if args.seed_start is None else args.seed_start)
     c = policy.config
+    if args.sampler is not None:
+        kinds = {"flow": ("euler", "midpoint"), "diffusion": ("ddim", "ddpm")}.get(info.get("policy_type"), ())
+        if args.sampler not in kinds:
+            raise ValueError(f"--sampler {args.sampler} does not apply to a {info.get('policy_type')!r} checkpoint; "
+                             f"expected one of {list(kinds)}")
     if args.no_ensembling or args.ensemble_decay is not None:
         if not hasattr(c, "temporal_ensembling"):
             raise ValueError(f"--no-ensembling/--ensemble-decay apply to ACT checkpoints, this one is {info.get('policy_type')!r}")

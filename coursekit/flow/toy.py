@@ -19,13 +19,13 @@ mean of the data -- the regression answer.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import torch
 import torch.nn as nn
 
-from coursekit.flow.loss import flow_loss
+from coursekit.flow.loss import flow_loss, flow_matching_loss
 
 
 @dataclass(frozen=True)
@@ -92,7 +92,8 @@ class VelocityMLP(nn.Module):
 
 def train_toy_flow(mixture: Mixture1D, steps: int = 1500, batch_size: int = 512, lr: float = 3e-3,
                    seed: int = 0, time_sampling: str = "uniform", hidden: int = 64,
-                   losses: list[float] | None = None) -> VelocityMLP:
+                   losses: list[float] | None = None, loss_fn: Callable[..., torch.Tensor] = flow_matching_loss,
+                   ) -> VelocityMLP:
     """Fit a ``VelocityMLP`` to ``mixture`` with the flow-matching loss (Adam, cosine LR); deterministic by seed.
 
     Args:
@@ -101,6 +102,7 @@ def train_toy_flow(mixture: Mixture1D, steps: int = 1500, batch_size: int = 512,
         seed: seeds the weights, the data and the loss's t and e.
         time_sampling: "uniform" (default for the toy: every time matters for the plot) or "beta".
         losses: if given, the loss of every step is appended to it.
+        loss_fn: ``(model, a0, cond, t, noise) -> scalar``: the library's loss or a student's.
     """
     if not isinstance(steps, int) or steps < 1:
         raise ValueError(f"steps must be a positive int, got {steps!r}")
@@ -113,7 +115,7 @@ def train_toy_flow(mixture: Mixture1D, steps: int = 1500, batch_size: int = 512,
     with torch.enable_grad():  # also when called under torch.no_grad()
         for _ in range(steps):
             a0 = mixture.sample(batch_size, generator=g)  # (B, 1)
-            loss = flow_loss(model, a0, None, time_sampling, generator=g)
+            loss = flow_loss(model, a0, None, time_sampling, generator=g, loss_fn=loss_fn)
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()
