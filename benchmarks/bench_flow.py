@@ -8,7 +8,8 @@ Run: ``.venv/bin/python -m benchmarks.bench_flow`` (about 10 minutes on one thre
   ``--episodes`` (default 200) held-out seeds 100000.. and the same sampling seed 0, 300 steps,
   the paper's protocol (mean of max coverage reward; success = coverage > 95 %). 95 % intervals:
   Wilson for success rates, a seeded percentile bootstrap (10,000 resamples of the seeds) for
-  mean scores and for the paired difference flow Euler-4 minus DP DDIM-10 (paired: same seeds).
+  mean scores and for the paired difference flow Euler-4 minus DP DDIM-10 (paired: same seeds);
+  both from :mod:`coursekit.stats`.
   Each evaluation is cached in ``--out`` as JSON (per-episode max reward and success) and reused
   when the checkpoint file and seeds are unchanged (``--fresh`` re-runs them).
 - ``latency``: one chunk at batch 1 (B=1, To observations), median over ``--repeats`` rounds in
@@ -28,7 +29,6 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
-import math
 import os
 import statistics
 import time
@@ -41,6 +41,7 @@ from benchmarks.results import record
 from coursekit.checkpoint import load_checkpoint, read_checkpoint_info
 from coursekit.evaluate import evaluate_pusht, heldout_seeds
 from coursekit.io import atomic_write_text
+from coursekit.stats import bootstrap_interval, mean_estimate, rate_estimate
 
 COMMAND = ".venv/bin/python -m benchmarks.bench_flow"
 SECTION = "Flow matching"
@@ -49,24 +50,6 @@ CKPT = {"flow": ROOT / "coursekit" / "checkpoints" / "pusht_flow_state",
         "diffusion": ROOT / "coursekit" / "checkpoints" / "pusht_diffusion_state",
         "act": ROOT / "coursekit" / "checkpoints" / "act_pusht"}
 FLOW_STEPS = (1, 2, 4, 10)
-
-
-def wilson(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:
-    """Wilson score interval of a binomial proportion (95 % by default)."""
-    if n < 1:
-        raise ValueError(f"need n >= 1 episodes, got {n}")
-    p = successes / n
-    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return max(0.0, centre - half), min(1.0, centre + half)
-
-
-def bootstrap_mean(values: np.ndarray, n_boot: int = 10000, seed: int = 0) -> tuple[float, float]:
-    """95 % percentile-bootstrap interval of the mean of ``values`` (N,) (or of paired differences)."""
-    rng = np.random.default_rng(seed)
-    idx = rng.integers(0, len(values), size=(n_boot, len(values)))  # (n_boot, N) resampled seeds
-    means = values[idx].mean(axis=1)
-    return float(np.percentile(means, 2.5)), float(np.percentile(means, 97.5))
 
 
 def _weights_hash(checkpoint: Path) -> str:
@@ -118,20 +101,21 @@ def part_score(args: argparse.Namespace, rec) -> None:
     trained = f"flow trained {training_note(CKPT['flow'])}; DP trained {training_note(CKPT['diffusion'])}"
     common = (f"{args.episodes} held-out seeds {seeds[0]}..{seeds[-1]} (the same for every row), sampling seed 0, "
               f"300 steps; 400 demos (DART 0/5 px), keypoint features, U-Net 64/128/256, recipe cpu; {trained}")
+    seed_range = f"{seeds[0]}-{seeds[-1]}"
     for (kind, n), d in res.items():
-        r, s = np.asarray(d["max_reward"]), np.asarray(d["success"])
-        lo, hi = bootstrap_mean(r)
-        slo, shi = wilson(int(s.sum()), len(s))
+        score = mean_estimate(d["max_reward"])
+        rate = rate_estimate(np.asarray(d["success"], dtype=bool))
         label = f"flow matching score, Euler-{n}" if kind == "flow" else "DP score, DDIM-10 (same seeds as flow)"
-        rec(SECTION, label, round(float(r.mean()), 3), "", f"{COMMAND} --only score",
+        rec(SECTION, label, round(score.value, 3), "", f"{COMMAND} --only score",
             target=">= DP DDIM-10 - 0.03" if (kind, n) == ("flow", 4) else "",
-            note=f"95 % CI {lo:.3f}-{hi:.3f} (bootstrap); success {s.mean():.1%} (Wilson 95 % {slo:.1%}-{shi:.1%}); "
-                 f"{n} U-Net calls per chunk; {common}")
+            note=f"success {rate.value:.1%} (Wilson 95 % {rate.lo:.1%}-{rate.hi:.1%}); {n} U-Net calls per chunk; {common}",
+            interval=(round(score.lo, 3), round(score.hi, 3)), n=score.n, seeds=seed_range)
     diff = np.asarray(res[("flow", 4)]["max_reward"]) - np.asarray(res[("diffusion", 10)]["max_reward"])
-    lo, hi = bootstrap_mean(diff)
+    lo, hi = bootstrap_interval(diff)
     print(f"flow Euler-4 minus DP DDIM-10: {diff.mean():+.3f} (95 % CI {lo:+.3f} .. {hi:+.3f}, paired)")
     rec(SECTION, "flow Euler-4 minus DP DDIM-10 score", round(float(diff.mean()), 3), "", f"{COMMAND} --only score",
-        target=">= -0.03", note=f"paired over seeds, 95 % CI {lo:+.3f} to {hi:+.3f} (bootstrap); {common}")
+        target=">= -0.03", note=f"paired over the same seeds (bootstrap of per-seed differences); {common}",
+        interval=(round(lo, 3), round(hi, 3)), n=len(diff), seeds=seed_range)
 
 
 def _chunk_call(policy, kind: str, n: int | None):
@@ -175,13 +159,15 @@ def part_latency(args: argparse.Namespace, rec) -> None:
 def part_shipped(args: argparse.Namespace, rec) -> None:
     seeds = heldout_seeds(50)
     d = evaluate_cached(CKPT["flow"], None, None, seeds, args.out / "eval_flow_default_50.json", reuse=not args.fresh)
-    r = np.asarray(d["max_reward"])
-    print(f"shipped flow (its default, Euler-10), 50 seeds: score {r.mean():.3f}, success {np.mean(d['success']):.0%}")
-    rec(SECTION, "shipped flow checkpoint score, Euler-10 (notebook 10)", round(float(r.mean()), 3), "",
+    score = mean_estimate(d["max_reward"])
+    rate = rate_estimate(np.asarray(d["success"], dtype=bool))
+    print(f"shipped flow (its default, Euler-10), 50 seeds: score {score}, success {rate.value:.0%}")
+    rec(SECTION, "shipped flow checkpoint score, Euler-10 (notebook 10)", round(score.value, 3), "",
         f"{COMMAND} --only shipped",
-        note=f"success {np.mean(d['success']):.0%}; stderr {r.std(ddof=1) / math.sqrt(len(r)):.3f}; 50 held-out seeds "
-             f"from 100000, 300 steps, the checkpoint's default sampler; trained {training_note(CKPT['flow'])} "
-             f"(float16 weights); evaluated with {d['torch_threads']} torch thread(s)")
+        note=f"success {rate.value:.0%}; 50 held-out seeds from 100000, 300 steps, the checkpoint's default sampler; "
+             f"trained {training_note(CKPT['flow'])} (float16 weights); evaluated with {d['torch_threads']} torch "
+             f"thread(s); reproduced by tests/test_shipped_checkpoints.py",
+        interval=(round(score.lo, 3), round(score.hi, 3)), n=score.n, seeds=f"{seeds[0]}-{seeds[-1]}")
 
 
 def main(argv: list[str] | None = None) -> None:

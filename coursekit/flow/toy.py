@@ -121,7 +121,7 @@ def train_toy_flow(mixture: Mixture1D, steps: int = 1500, batch_size: int = 512,
             opt.step()
             sched.step()
             if losses is not None:
-                losses.append(float(loss))
+                losses.append(float(loss.detach()))
     return model.eval()
 
 
