@@ -40,7 +40,7 @@ import torch
 from benchmarks.results import record
 from coursekit.checkpoint import load_checkpoint, read_checkpoint_info
 from coursekit.evaluate import evaluate_pusht, heldout_seeds
-from coursekit.io import atomic_write_text
+from coursekit.atomic import atomic_write_text
 from coursekit.stats import bootstrap_interval, mean_estimate, rate_estimate
 
 COMMAND = ".venv/bin/python -m benchmarks.bench_flow"

@@ -70,7 +70,7 @@ def test_predict_chunk_is_euler_from_seeded_noise_clamped_and_raw():
     assert traj.shape == (5, 3, 16, 2)
     m = policy.predict_chunk(obs[0], generator=torch.Generator().manual_seed(5), sampler="midpoint", steps=2)
     assert m.shape == (16, 2)
-    assert policy.integration_info("midpoint", 2)["network_calls"] == 4
+    assert policy.describe_sampling(sampler="midpoint", steps=2)["network_calls"] == 4
 
 
 def test_bad_arguments_name_the_value():

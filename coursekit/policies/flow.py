@@ -63,6 +63,7 @@ class FlowMatchingPolicy(UNetChunkPolicy):
     policy_type = "flow"
     config_class = FlowMatchingPolicyConfig
     config: FlowMatchingPolicyConfig
+    sampling_options = ("sampler", "num_inference_steps", "steps", "return_trajectory", "step_fn")
 
     def velocity(self, x_t: torch.Tensor, t: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
         """v_theta: chunk x_t (B, Tp, Da), times t (B,) in [0, 1], condition (B, cond_dim) -> (B, Tp, Da)."""
@@ -79,17 +80,20 @@ class FlowMatchingPolicy(UNetChunkPolicy):
         loss = flow_loss(self.velocity, action_n, cond, self.config.time_sampling, generator=generator, loss_fn=loss_fn)
         return {"loss": loss}
 
-    def integration_info(self, sampler: str | None = None, num_inference_steps: int | None = None) -> dict[str, Any]:
-        """What ``predict_chunk`` runs with these overrides: method, steps and U-Net calls per chunk."""
-        method = sampler or self.config.integration_method
-        steps = num_inference_steps or self.config.num_inference_steps
+    def describe_sampling(self, **sampling: Any) -> dict[str, Any]:
+        """Which integrator, how many steps and U-Net calls ``predict_chunk(..., **sampling)`` runs (for reports)."""
+        self.check_sampling(sampling)
+        method = sampling.get("sampler") or self.config.integration_method
+        if method not in METHODS:
+            raise ValueError(f"sampler must be one of {METHODS} for a flow policy, got {method!r}")
+        steps = sampling.get("steps") or sampling.get("num_inference_steps") or self.config.num_inference_steps
         return {"sampler": method, "num_inference_steps": steps,
                 "network_calls": steps * (2 if method == "midpoint" else 1)}
 
     @torch.no_grad()
-    def predict_chunk(self, obs_history: Any, sampler: str | None = None, num_inference_steps: int | None = None,
-                      generator: torch.Generator | None = None, return_trajectory: bool = False,
-                      steps: int | None = None, step_fn: Callable[..., torch.Tensor] | None = None) -> Any:
+    def predict_chunk(self, obs_history: Any, *, generator: torch.Generator | None = None, sampler: str | None = None,
+                      num_inference_steps: int | None = None, steps: int | None = None,
+                      return_trajectory: bool = False, step_fn: Callable[..., torch.Tensor] | None = None) -> Any:
         """Raw history (B, To, Do) (or dict for images; or unbatched (To, Do)) -> raw chunk (B, Tp, Da).
 
         Numpy in, numpy out; tensors in, tensors out. ``sampler`` ('euler'/'midpoint') and
