@@ -108,7 +108,7 @@ def part_score(args: argparse.Namespace, rec) -> None:
         label = f"flow matching score, Euler-{n}" if kind == "flow" else "DP score, DDIM-10 (same seeds as flow)"
         rec(SECTION, label, round(score.value, 3), "", f"{COMMAND} --only score",
             target=">= DP DDIM-10 - 0.03" if (kind, n) == ("flow", 4) else "",
-            note=f"success {rate.value:.1%} (Wilson 95 % {rate.lo:.1%}-{rate.hi:.1%}); {n} U-Net calls per chunk; {common}",
+            note=f"success {rate.value:.1%} (Wilson 95 % {rate.lo:.1%}-{rate.hi:.1%}); {n} U-Net call(s) per chunk; {common}",
             interval=(round(score.lo, 3), round(score.hi, 3)), n=score.n, seeds=seed_range)
     diff = np.asarray(res[("flow", 4)]["max_reward"]) - np.asarray(res[("diffusion", 10)]["max_reward"])
     lo, hi = bootstrap_interval(diff)
