@@ -130,7 +130,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--policies", nargs="+", default=["dp_ddim10", "regression"], choices=sorted(POLICIES))
     parser.add_argument("--parts", nargs="+", default=list(PARTS), choices=PARTS)
     parser.add_argument("--out", type=Path, default=ROOT / "outputs" / "bench_claims", help="per-episode results")
-    parser.add_argument("--commit-starts", type=int, default=8, help="two-way starts for the commitment part")
+    parser.add_argument("--commit-starts", type=int, default=16, help="two-way starts for the commitment part")
     parser.add_argument("--commit-samples", type=int, default=32, help="DP chunks sampled per start")
     parser.add_argument("--compare", type=Path, default=None, help="an earlier DDIM-10 per-episode json to check against")
     parser.add_argument("--threads", type=int, default=1, help="torch threads")
@@ -147,7 +147,8 @@ def main(argv: list[str] | None = None) -> int:
     two = np.array([flags[s]["two_way"] for s in seeds])
     print(f"two-way first decision on {two.sum()} of {len(seeds)} seeds ({seed_range(seeds)})")
     cmd = (f".venv/bin/python -m benchmarks.bench_claims --episodes {args.episodes} --seed-start {args.seed_start} "
-           f"--policies {' '.join(args.policies)} --threads {args.threads}")
+           f"--policies {' '.join(args.policies)} --commit-starts {args.commit_starts} "
+           f"--commit-samples {args.commit_samples} --threads {args.threads}")
 
     def rec(name, est, unit, note, seeds_txt=seed_range(seeds)):
         print(f"  {name}: {est}")
