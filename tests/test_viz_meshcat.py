@@ -87,7 +87,7 @@ def test_close_kills_the_server_and_is_idempotent():
     s = MeshcatScene()
     pid = s.server_pid
     proc = psutil.Process(pid)
-    assert proc.is_running() and "meshcat.servers.zmqserver" in " ".join(proc.cmdline())
+    assert proc.is_running() and "meshcat_server.py" in " ".join(proc.cmdline())
     s.close()
     assert _server_gone(pid)
     s.close()  # twice is fine
