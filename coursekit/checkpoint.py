@@ -132,6 +132,15 @@ def save_checkpoint(policy: Any, path: str | os.PathLike, *, dataset_meta: dict[
     return path
 
 
+def is_checkpoint_dir(path: str | os.PathLike) -> bool:
+    """True if ``path`` is a directory holding exactly a coursekit checkpoint (so replacing it loses nothing else)."""
+    try:
+        check_replaceable(path)
+    except ValueError:
+        return False
+    return Path(path).is_dir() and any(Path(path).iterdir())
+
+
 def check_replaceable(path: str | os.PathLike) -> None:
     """Refuse (ValueError) to write a checkpoint over anything but nothing, an empty directory or a checkpoint.
 

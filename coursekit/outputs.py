@@ -1,4 +1,7 @@
-"""Output directories replaced atomically, and the leftovers of killed runs cleaned by the next run.
+"""Safe outputs: paths checked before work, directories replaced atomically, leftovers of killed runs cleaned.
+
+:func:`check_output` refuses, before any work, an output path that would destroy an input or
+something coursekit did not write, and an existing output of its own without ``overwrite``.
 
 A command writes a directory output (a checkpoint) into a hidden staging directory beside it,
 ``.NAME.XXXXXXXX.tmp``, and then swaps it into place::
@@ -28,7 +31,7 @@ import os
 import re
 import shutil
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
 try:
@@ -142,3 +145,56 @@ def clean_leftovers(path: str | os.PathLike) -> list[Path]:
             entry.unlink(missing_ok=True)
         removed.append(entry)
     return removed
+
+
+def check_output(path: str | os.PathLike, *, what: str, is_ours: Callable[[Path], bool], directory: bool,
+                 overwrite: bool = False, inputs: Iterable[str | os.PathLike | None] = (), flag: str = "--out") -> Path:
+    """Check an output path BEFORE any work starts; ValueError (one line naming ``flag`` and the path) if unsafe.
+
+    Refused: the path is (or is inside) one of ``inputs``, or a directory output would contain
+    one; the nearest existing ancestor is a file or not writable; the path is a link; a file
+    where a directory is wanted or the reverse; something that exists and is not ours
+    (``is_ours(path)`` False: a user's folder or file, never deleted); one of ours without
+    ``overwrite``. Allowed: a new path, an empty directory (directory outputs), and with
+    ``overwrite`` an existing output of this kind, which the writer then replaces atomically.
+    """
+    path = Path(path)
+    shown = f"{flag} {str(path)!r}"
+    target = path.resolve()
+    for given in inputs:
+        if given is None:
+            continue
+        source = Path(given).resolve()
+        if target == source or source in target.parents:
+            raise ValueError(f"{shown} is the input {str(given)!r} or inside it: writing there would destroy the "
+                             f"input; choose another path")
+        if directory and target in source.parents:
+            raise ValueError(f"{shown} contains the input {str(given)!r}: choose an output path outside the inputs")
+    ancestor = target.parent
+    while not ancestor.exists():
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        raise ValueError(f"{shown}: {str(ancestor)!r} is a file, so nothing can be written inside it; choose another path")
+    if not os.access(ancestor, os.W_OK | os.X_OK):
+        raise ValueError(f"{shown}: the directory {str(ancestor)!r} is not writable")
+    if path.is_symlink():
+        raise ValueError(f"{shown} is a symbolic link; give the real path (coursekit never writes through links)")
+    if not path.exists():
+        return path
+    if directory and not path.is_dir():
+        raise ValueError(f"{shown} exists and is a file, not a {what} directory; refusing to replace it: choose another path")
+    if not directory and path.is_dir():
+        raise ValueError(f"{shown} is a directory; it must name a {what} file (nothing in the directory is touched)")
+    if directory and not any(path.iterdir()):
+        return path
+    if not is_ours(path):
+        if directory:
+            names = sorted(p.name for p in path.iterdir())
+            held = f" (it holds {', '.join(names[:4])}{', ...' if len(names) > 4 else ''})"
+        else:
+            held = ""
+        raise ValueError(f"{shown} exists and is not a {what}{held}; refusing to replace it: choose another path")
+    if not overwrite:
+        raise ValueError(f"{shown} already holds a {what}; pass --overwrite to replace it (the old one stays "
+                         f"until the new one is complete)")
+    return path

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import sys
 import time
 from pathlib import Path
 
@@ -16,6 +17,7 @@ TASKS: dict[str, str] = {
     "aloha-insertion": "coursekit.experts.aloha_scripted:collect_insertion",
 }
 DEFAULT_EPISODES = {"pusht": 200, "aloha-cube": 50, "aloha-insertion": 50}
+MAX_SEED = 2**32 - 1  # the environments' largest reset seed
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -27,13 +29,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="pusht only: DART execution noise in px (the env runs the expert's target plus Gaussian "
                              "noise, the file keeps the clean target); a comma list is cycled over episodes, "
                              "e.g. 0,10 alternates clean and noisy demonstrations (default 0)")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace an existing dataset at --out (atomically: the old file stays until the new one is complete)")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
 def run(args: argparse.Namespace) -> int:
+    from coursekit.data.episodes import is_dataset_file
+    from coursekit.outputs import check_output, clean_leftovers
+
     episodes = args.episodes if args.episodes is not None else DEFAULT_EPISODES[args.task]
     if episodes < 1:
         raise ValueError(f"--episodes must be at least 1, got {episodes}")
+    if not 0 <= args.seed <= MAX_SEED - (episodes - 1):
+        raise ValueError(f"--seed must be in [0, {MAX_SEED - (episodes - 1)}] (episode i uses seed + i), got {args.seed}")
     module_name, func_name = TASKS[args.task].split(":")
     collect = getattr(importlib.import_module(module_name), func_name)
     extra, tag = {}, ""
@@ -45,6 +54,9 @@ def run(args: argparse.Namespace) -> int:
         extra["action_noise"] = parse_action_noise(args.action_noise)
         tag = noise_tag(extra["action_noise"])
     out = args.out or Path("outputs/data") / f"{args.task}_{episodes}ep_seed{args.seed}{tag}.npz"
+    check_output(out, what="coursekit dataset", is_ours=is_dataset_file, directory=False, overwrite=args.overwrite)
+    for leftover in clean_leftovers(out):
+        print(f"removed {str(leftover)!r}, left by an interrupted earlier run", file=sys.stderr)
     start = time.perf_counter()
     dataset = collect(episodes, args.seed, progress=not args.no_progress, **extra)
     dataset.save(out)

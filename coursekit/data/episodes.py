@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from coursekit.io import atomic_path
+from coursekit.outputs import clean_leftovers
 
 FORMAT_VERSION = 1
 _META_KEY = "__meta__"
@@ -113,8 +114,12 @@ class EpisodeDataset:
 
     # ---- disk ---------------------------------------------------------------------------
     def save(self, path: str | os.PathLike) -> Path:
-        """Write atomically to ``path`` (``.npz``); an existing file is replaced only on success."""
+        """Write atomically to ``path`` (``.npz``); an existing file is replaced only on success.
+
+        Hidden temporaries that killed earlier writes left beside ``path`` are removed first.
+        """
         path = Path(path)
+        clean_leftovers(path)
         meta = {"format_version": FORMAT_VERSION, **self.meta}
         payload = {k: np.ascontiguousarray(v) for k, v in self.arrays.items()}
         payload[_ENDS_KEY] = self.episode_ends
@@ -194,3 +199,12 @@ def _refuse_object_arrays(path: Path) -> None:
             if dtype.hasobject:
                 raise DatasetError(f"{str(path)!r}: array {info.filename[:-4]!r} holds Python objects (dtype {dtype}); "
                                    f"coursekit never unpickles data, so this is not a dataset it can read")
+
+
+def is_dataset_file(path: str | os.PathLike) -> bool:
+    """True if ``path`` is an .npz with the members every coursekit dataset has (only the zip index is read)."""
+    try:
+        with zipfile.ZipFile(path) as zf:
+            return {f"{_META_KEY}.npy", f"{_ENDS_KEY}.npy"} <= set(zf.namelist())
+    except (OSError, zipfile.BadZipFile, ValueError):
+        return False
