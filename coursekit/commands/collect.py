@@ -8,6 +8,8 @@ import sys
 import time
 from pathlib import Path
 
+from coursekit.commands._args import MAX_SEED, positive_int, seed_int
+
 HELP = "generate scripted demonstrations (pusht, aloha-cube, aloha-insertion) into a dataset file"
 
 # task -> "module:function" with signature (n_episodes, seed, progress=True) -> EpisodeDataset
@@ -17,13 +19,12 @@ TASKS: dict[str, str] = {
     "aloha-insertion": "coursekit.experts.aloha_scripted:collect_insertion",
 }
 DEFAULT_EPISODES = {"pusht": 200, "aloha-cube": 50, "aloha-insertion": 50}
-MAX_SEED = 2**32 - 1  # the environments' largest reset seed
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("task", choices=sorted(TASKS), help="which task's scripted expert to run")
-    parser.add_argument("--episodes", type=int, default=None, help="number of demonstrations (default: 200 PushT, 50 ALOHA)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the first episode; episode i uses seed + i")
+    parser.add_argument("--episodes", type=positive_int, default=None, help="number of demonstrations (default: 200 PushT, 50 ALOHA)")
+    parser.add_argument("--seed", type=seed_int, default=0, help="seed of the first episode; episode i uses seed + i")
     parser.add_argument("--out", type=Path, default=None, help="output .npz (default: outputs/data/<task>_<episodes>ep_seed<seed>[_noise<levels>].npz)")
     parser.add_argument("--action-noise", default=None,
                         help="pusht only: DART execution noise in px (the env runs the expert's target plus Gaussian "
@@ -39,9 +40,7 @@ def run(args: argparse.Namespace) -> int:
     from coursekit.outputs import check_output, clean_leftovers
 
     episodes = args.episodes if args.episodes is not None else DEFAULT_EPISODES[args.task]
-    if episodes < 1:
-        raise ValueError(f"--episodes must be at least 1, got {episodes}")
-    if not 0 <= args.seed <= MAX_SEED - (episodes - 1):
+    if args.seed > MAX_SEED - (episodes - 1):
         raise ValueError(f"--seed must be in [0, {MAX_SEED - (episodes - 1)}] (episode i uses seed + i), got {args.seed}")
     module_name, func_name = TASKS[args.task].split(":")
     collect = getattr(importlib.import_module(module_name), func_name)
