@@ -307,6 +307,6 @@ def test_demo_command_rejects_bad_budgets(tmp_path, capsys):
     from coursekit.cli import main
 
     assert main(["demo", "--episodes", "0", "--out", str(tmp_path)]) == 2
-    assert "--episodes must be between 1 and 1000, got 0" in capsys.readouterr().err
+    assert "argument --episodes: must be an integer in [1, 1000], got '0'" in capsys.readouterr().err
     assert main(["demo", "--episodes", "2", "--replay", "5", "--out", str(tmp_path)]) == 2
     assert "--replay must index one of the 2 episodes, got 5" in capsys.readouterr().err

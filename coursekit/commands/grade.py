@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from coursekit.commands._args import int_in, positive_float, positive_int
+
 HELP = "grade a folder of submissions (copies or zips of exercises/): class CSV, Gradescope JSON, feedback"
 
 
@@ -13,10 +15,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, required=True, help="where grades.csv and <student>/results.json, feedback.md go")
     parser.add_argument("--exercise", action="append", default=None, metavar="ID",
                         help="grade only this exercise (repeatable; default: all registered)")
-    parser.add_argument("--jobs", type=int, default=1, help="submissions graded in parallel (one subprocess each)")
-    parser.add_argument("--timeout", type=float, default=120.0, help="wall-clock limit per student x exercise, seconds")
-    parser.add_argument("--test-timeout", type=float, default=10.0, help="limit per test, seconds")
-    parser.add_argument("--memory-mb", type=int, default=2048, help="address-space cap per subprocess, MiB")
+    parser.add_argument("--jobs", type=positive_int, default=1, help="submissions graded in parallel (one subprocess each)")
+    parser.add_argument("--timeout", type=positive_float, default=120.0, help="wall-clock limit per student x exercise, seconds")
+    parser.add_argument("--test-timeout", type=positive_float, default=10.0, help="limit per test, seconds")
+    parser.add_argument("--memory-mb", type=int_in(256), default=2048, help="address-space cap per subprocess, MiB")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
