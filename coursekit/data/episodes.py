@@ -165,7 +165,8 @@ class EpisodeDataset:
                 arrays = {k: npz[k] for k in sorted(names - {_META_KEY, _ENDS_KEY})}
         except DatasetError:
             raise
-        except (zipfile.BadZipFile, zlib.error, EOFError, OSError, ValueError, KeyError) as exc:
+        except (zipfile.BadZipFile, zlib.error, EOFError, OSError, ValueError, KeyError, RuntimeError,
+                NotImplementedError) as exc:  # zipfile: flipped flags read as encryption / unknown compression
             raise DatasetError(f"dataset file {where} is truncated or corrupt ({type(exc).__name__}: {exc})") from exc
         if meta_text.shape != () or meta_text.dtype.kind != "U":
             raise DatasetError(f"{where}: {_META_KEY!r} must be one JSON string, got a {meta_text.dtype} array of shape {meta_text.shape}")
@@ -206,5 +207,5 @@ def is_dataset_file(path: str | os.PathLike) -> bool:
     try:
         with zipfile.ZipFile(path) as zf:
             return {f"{_META_KEY}.npy", f"{_ENDS_KEY}.npy"} <= set(zf.namelist())
-    except (OSError, zipfile.BadZipFile, ValueError):
+    except (OSError, zipfile.BadZipFile, ValueError, RuntimeError, NotImplementedError):
         return False
