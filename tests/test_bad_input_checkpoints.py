@@ -222,27 +222,26 @@ def test_every_shipped_checkpoint_loads_strictly_and_is_bound_to_its_config():
         assert "config_sha256" in info["weights"], path.name
 
 
-def test_a_directory_that_is_not_a_checkpoint_is_never_replaced(saved, tmp_path):
+def test_saving_never_deletes_or_replaces_a_users_files(saved, tmp_path):
     policy, _ = saved
     results = tmp_path / "results"
     results.mkdir()
     (results / "notes.txt").write_text("mine")
-    with pytest.raises(ValueError, match="not a coursekit checkpoint"):
-        save_checkpoint(policy, results)
-    assert (results / "notes.txt").read_text() == "mine" and sorted(os.listdir(results)) == ["notes.txt"]
+    save_checkpoint(policy, results)  # other files are carried over
+    assert (results / "notes.txt").read_text() == "mine"
+    assert sorted(os.listdir(results)) == ["config.json", "model.safetensors", "notes.txt"]
+    theirs = tmp_path / "theirs"
+    theirs.mkdir()
+    (theirs / "config.json").write_text('{"learning_rate": 3}')
+    with pytest.raises(ValueError, match="holds config.json that are not a coursekit checkpoint's"):
+        save_checkpoint(policy, theirs)
+    assert (theirs / "config.json").read_text() == '{"learning_rate": 3}' and os.listdir(theirs) == ["config.json"]
     data = tmp_path / "demos.npz"
     data.write_bytes(b"user data")
     with pytest.raises(ValueError, match="not a directory"):
         save_checkpoint(policy, data)
     assert data.read_bytes() == b"user data"
-
-
-def test_a_checkpoint_with_a_users_extra_file_is_not_replaced(saved):
-    policy, path = saved
-    (path / "eval.json").write_text("{}")
-    with pytest.raises(ValueError, match="eval.json"):
-        save_checkpoint(policy, path)
-    assert (path / "eval.json").read_text() == "{}"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ckpt", "demos.npz", "results", "theirs"]  # no leftovers
 
 
 def test_num_inference_steps_none_means_the_samplers_own_default():

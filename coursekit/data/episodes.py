@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from coursekit.io import atomic_path
+from coursekit.atomic import atomic_path
 from coursekit.outputs import clean_leftovers
 
 FORMAT_VERSION = 1
