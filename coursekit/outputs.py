@@ -182,7 +182,7 @@ def check_output(path: str | os.PathLike, *, what: str, is_ours: Callable[[Path]
     if not path.exists():
         return path
     if directory and not path.is_dir():
-        raise ValueError(f"{shown} exists and is a file, not a {what} directory; refusing to replace it: choose another path")
+        raise ValueError(f"{shown} exists and is a file, not a {what}; refusing to replace it: choose another path")
     if not directory and path.is_dir():
         raise ValueError(f"{shown} is a directory; it must name a {what} file (nothing in the directory is touched)")
     if directory and not any(path.iterdir()):

@@ -69,3 +69,14 @@ def device(text: str) -> str:
     if not _DEVICE.fullmatch(text):
         raise argparse.ArgumentTypeError(f"must be auto, cpu, cuda, cuda:N or mps, got {text!r}")
     return text
+
+
+def positive_int_list(text: str) -> tuple[int, ...]:
+    """An argparse type: comma-separated positive integers, e.g. 32,64,128."""
+    try:
+        values = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if not values or any(v < 1 for v in values):
+        raise argparse.ArgumentTypeError(f"must be comma-separated positive integers like 32,64,128, got {text!r}")
+    return values
