@@ -43,9 +43,16 @@ _RENAME_EXCHANGE = 2
 _AT_FDCWD = -100
 
 
+_RANDOM = r"(?:[a-z0-9_]{8}|[0-9a-f]{32})"
+"""The random part of a temporary's name: tempfile.mkdtemp's 8 characters or atomic_path's uuid4 hex."""
+
+
 def _leftover_pattern(name: str) -> re.Pattern[str]:
-    """Hidden names coursekit's writers give their temporaries for ``name`` (staging dirs, atomic files)."""
-    return re.compile(rf"\.{re.escape(name)}\.[A-Za-z0-9_]+\.(tmp|old)(\.[A-Za-z0-9]+)?")
+    """Hidden names coursekit's writers give their temporaries for ``name``: ``.NAME.<random>.tmp[.ext]``,
+    ``.NAME.<random>.old``, and a checkpoint's staging folder inside a run's (``..NAME.<random>.tmp.<random>.tmp``).
+    The random part has the exact shape coursekit draws, so a user's ``.NAME.backup.old`` never matches."""
+    n = re.escape(name)
+    return re.compile(rf"\.{n}\.{_RANDOM}\.(?:tmp|old)(?:\.[A-Za-z0-9]+)?|\.\.{n}\.{_RANDOM}\.tmp\.{_RANDOM}\.tmp")
 
 
 def _lock(path: Path) -> int | None:
