@@ -181,4 +181,9 @@ def test_train_with_overwrite_killed_at_random_points(tmp_path):
     done = subprocess.run(train(run, 1, "--overwrite"), env=ENV, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert _weights_sha(run) == new
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["demos.npz", "reference", "run"], "leftovers not cleaned"
+    fresh = tmp_path / "fresh"  # a first run killed: what it left is recognised as a run, replaced with --overwrite
+    _run_and_kill(train(fresh, 1), 0.6 * full_s)
+    again = subprocess.run(train(fresh, 1, "--overwrite"), env=ENV, capture_output=True, text=True, timeout=300)
+    assert again.returncode == 0, again.stderr
+    assert _weights_sha(fresh) == new
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["demos.npz", "fresh", "reference", "run"], "leftovers not cleaned"

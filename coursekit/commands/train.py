@@ -102,10 +102,10 @@ def _config_fields(args: argparse.Namespace) -> dict[str, Any]:
 def run(args: argparse.Namespace) -> int:
     """One flow for every policy type and task: check the output, build, train with callbacks, report."""
     from coursekit.checkpoint import CheckpointSaver, warm_start
-    from coursekit.device import resolve_device
-    from coursekit.outputs import clean_leftovers, replace_dir, staging_dir
     from coursekit.data.episodes import EpisodeDataset
     from coursekit.data.features import default_features
+    from coursekit.device import resolve_device
+    from coursekit.outputs import clean_leftovers, replace_dir, staging_dir
     from coursekit.policies import get_policy_class
     from coursekit.policies.factory import make_policy
     from coursekit.train import TrainConfig, train
@@ -154,15 +154,27 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-RUN_FILES = ("config.json", "model.safetensors", "metrics.csv", "loss.png")
-"""Everything `coursekit train` writes into a run folder (so replacing one loses nothing else)."""
-
-
 def is_run_dir(path: Path) -> bool:
-    """A run folder `coursekit train` wrote: a readable checkpoint and nothing but a run's files."""
-    from coursekit.checkpoint import is_checkpoint_dir
+    """A run folder `coursekit train` wrote (finished, or interrupted before its first checkpoint).
 
-    return is_checkpoint_dir(path) and all(p.name in RUN_FILES for p in path.iterdir())
+    Nothing in it but a run's files (checkpoint, metrics.csv, loss.png), and either a readable
+    checkpoint or a metrics.csv with the trainer's own header: a user's folder never qualifies.
+    """
+    from coursekit.checkpoint import CONFIG_FILE, WEIGHTS_FILE, is_checkpoint_dir
+    from coursekit.viz.run_log import COLUMNS, LOSS_PLOT_NAME, METRICS_NAME
+
+    names = {p.name for p in path.iterdir()}
+    if not names or not names <= {CONFIG_FILE, WEIGHTS_FILE, METRICS_NAME, LOSS_PLOT_NAME}:
+        return False
+    if is_checkpoint_dir(path):
+        return True
+    if names & {CONFIG_FILE, WEIGHTS_FILE}:
+        return False  # a checkpoint's file names without a readable checkpoint: not ours to replace
+    try:
+        with open(path / METRICS_NAME, encoding="utf-8") as fh:
+            return fh.readline().strip() == ",".join(COLUMNS)
+    except (OSError, UnicodeDecodeError):
+        return False
 
 
 def check_run_out(args: argparse.Namespace) -> None:
