@@ -30,6 +30,7 @@ import ctypes.util
 import os
 import re
 import shutil
+import sys
 import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
@@ -86,7 +87,7 @@ def staging_dir(path: str | os.PathLike) -> Iterator[Path]:
 def _exchange(a: Path, b: Path) -> bool:
     """Atomically swap the paths ``a`` and ``b`` (Linux renameat2); False where the call is unavailable."""
     libc_name = ctypes.util.find_library("c")
-    if not libc_name or not os.uname().sysname == "Linux":
+    if not libc_name or not sys.platform.startswith("linux"):
         return False
     libc = ctypes.CDLL(libc_name, use_errno=True)
     fn = getattr(libc, "renameat2", None)
