@@ -39,7 +39,10 @@ def finite_array(value: Any, shape: tuple[int, ...], name: str, layout: str = ""
     """``value`` as a float64 array of exactly ``shape`` with finite entries, or a ValueError naming it."""
     layout = f" {layout}" if layout else ""
     try:
-        a = np.asarray(value, dtype=np.float64)
+        raw = np.asarray(value)
+        if raw.dtype.kind not in "iuf":  # numpy would turn "0" into 0.0 and True into 1.0: not numbers here
+            raise TypeError
+        a = raw.astype(np.float64)
     except (TypeError, ValueError):
         raise ValueError(f"{name} must be numeric with shape {shape}{layout}, got {value!r}") from None
     if a.shape != shape:
