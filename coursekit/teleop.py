@@ -148,18 +148,20 @@ class TeleopRecorder:
         """Reset the env to where the next episode will start, without recording; its state (5,)."""
         if self.recording:
             raise RuntimeError("an episode is being recorded: stop() or discard() it first")
-        _, info = _reset(self.env, self.next_reset())
+        return self._reset_env(self.next_reset())
+
+    def _reset_env(self, reset: dict[str, Any]) -> np.ndarray:
+        _, info = _reset(self.env, reset)
         self.coverage = float(info["coverage"])
         self.state = self.env.get_state()[:5]
         return self.state
 
     def start(self) -> np.ndarray:
         """Reset the env for a new episode; returns its first state (5,). Drops an unfinished one."""
-        self._rows = None
         self._reset = self.next_reset()
         if "seed" in self._reset:
             self.next_seed += 1
-        self.preview()
+        self._reset_env(self._reset)
         self._rows, self._success_step = [], None
         return self.state
 

@@ -161,9 +161,12 @@ class TeleopWidget(anywidget.AnyWidget):
             self.best_coverage = float(r.coverage)
             self.status = "recording: drag the pusher"
         elif event == "tick" and r.recording:
-            target = np.asarray(content.get("target"), dtype=np.float64)
+            try:
+                target = np.asarray(content.get("target"), dtype=np.float64)
+            except (TypeError, ValueError):
+                target = np.full(1, np.nan)
             if target.shape != (2,) or not np.all(np.isfinite(target)):
-                self.status = f"ignored a bad target {content.get('target')!r}"
+                self.status = f"ignored a bad target {content.get('target')!r} (expected [x, y])"
             elif not r.step(target):  # the episode ended by itself and was kept
                 self.status = (f"kept episode {len(r.episodes) - 1}: "
                                f"{'success' if r.success_steps[-1] is not None else 'max steps'}")
