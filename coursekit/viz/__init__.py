@@ -8,6 +8,8 @@ name below pulls its module (and that module's heavy imports) on first use.
     MujocoMeshcat, export_mujoco_rollout  any MuJoCo model in meshcat                   (mujoco_meshcat)
     show_html                           an exported page inline in a notebook          (notebook)
     screenshot_html, find_chromium      headless-chromium screenshots                  (browser)
+    TeleopWidget                        push the T with the mouse, recorded            (teleop_widget)
+    FigureScrubber                      sliders that redraw one figure in place        (widgets, widgets_chunks)
 """
 
 from __future__ import annotations
@@ -27,6 +29,8 @@ _LAZY = {
     "screenshot_html": "coursekit.viz.browser",
     "find_chromium": "coursekit.viz.browser",
     "ChromiumNotFoundError": "coursekit.viz.browser",
+    "TeleopWidget": "coursekit.viz.teleop_widget",
+    "FigureScrubber": "coursekit.viz.widgets",
 }
 __all__ = sorted(_LAZY)
 
