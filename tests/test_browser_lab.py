@@ -200,3 +200,23 @@ def test_teleop_widget_records_a_mouse_drag_that_trains_and_replays(page, lab, t
     assert main(["train", "--data", str(path_file), "--steps", "2", "--out", str(out), "--threads", "1",
                  "--no-progress", "--down-dims", "16,32"]) == 0
     assert (out / "config.json").is_file()
+
+
+def test_the_server_and_its_kernels_stop_even_when_a_test_fails(tmp_path):
+    """The guarantee every test above relies on: an exception inside the session still stops
+    the server, and the kernel it started (a process in a session of its own) with it."""
+    from lab_session import lab_server
+
+    seen = {}
+    with pytest.raises(RuntimeError, match="a failing test"):
+        with lab_server(tmp_path, []) as server:
+            seen["server"] = server
+            kernel = server.api("/api/kernels", method="POST")
+            deadline = time.monotonic() + 60
+            while not server.descendants() and time.monotonic() < deadline:
+                time.sleep(0.2)
+            assert server.descendants(), f"kernel {kernel} started no process"
+            raise RuntimeError("a failing test")
+    server = seen["server"]
+    assert server.proc.poll() is not None
+    assert not server.leftover(), f"left behind: {server.leftover()}"
