@@ -116,7 +116,7 @@ def draw_chunk_step(ax: Any, run: ChunkRollout, t: int) -> None:
             label=f"all Tp = {len(chunk)} predicted")
     run_part = chunk[to - 1: to - 1 + ta]
     ax.plot(run_part[:, 0], run_part[:, 1], "o-", color="tab:red", ms=4, lw=2, label=f"Ta = {ta} executed")
-    now = to - 1 + (t - t0)
+    now = min(to - 1 + (t - t0), len(chunk) - 1)
     ax.plot(*chunk[now], "x", color="k", ms=10, mew=2, label="target now")
     obs = run.states[max(0, t0 - to + 1): t0 + 1, :2]
     ax.plot(obs[:, 0], obs[:, 1], "s", color="tab:green", ms=6, label=f"To = {to} observed")
@@ -134,17 +134,18 @@ def chunk_replay(runs: dict[int, ChunkRollout]) -> FigureScrubber:
 
     def draw(fig: Figure, ta: int, step: int) -> None:
         run = runs[ta]
-        ax_scene, ax_time = fig.subplots(1, 2, width_ratios=[1.0, 0.9])
+        ax_scene, ax_time = fig.subplots(1, 2, width_ratios=[1.0, 0.6])
         draw_chunk_step(ax_scene, run, step)
         n = len(run.actions)
         ax_time.vlines(run.made_at, 0, 1, color="tab:orange", lw=1, label="a chunk is predicted")
         ax_time.axvline(min(step, n - 1), color="k", lw=2, label="this step")
-        ax_time.set(xlim=(-1, longest), ylim=(0, 1), yticks=[], xlabel="control step",
-                    title=f"Ta = {ta}: {len(run.made_at)} network calls in {n} steps, max reward {run.max_reward:.2f}")
+        ax_time.set(xlim=(-1, longest), ylim=(0, 1), yticks=[], xlabel="control step")
+        ax_time.set_title(f"Ta = {ta}: {len(run.made_at)} network calls in {n} steps\nmax reward {run.max_reward:.2f}",
+                          fontsize=9)
         ax_time.legend(fontsize=7, loc="upper right")
 
     controls = {
         "ta": widgets.Dropdown(options=tas, value=tas[-1], description="Ta"),
         "step": widgets.IntSlider(value=0, min=0, max=longest - 1, description="step", continuous_update=True),
     }
-    return FigureScrubber(draw, controls, figsize=(10.0, 4.4))
+    return FigureScrubber(draw, controls, figsize=(9.0, 4.2))
