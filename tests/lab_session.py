@@ -54,6 +54,13 @@ class LabServer:
             body = resp.read()
         return json.loads(body) if body else None
 
+    def shutdown_kernels(self) -> None:
+        """Shut down every running kernel (between tests: a closed tab leaves its kernel running)."""
+        self.descendants()  # remember them first: leftover() checks them at the end
+        for kernel in self.api("/api/kernels") or []:
+            with contextlib.suppress(OSError):
+                self.api(f"/api/kernels/{kernel['id']}", method="DELETE")
+
     def descendants(self) -> list[psutil.Process]:
         """Every process the server started so far (remembered: kernels outlive a dead server)."""
         with contextlib.suppress(psutil.Error):

@@ -62,12 +62,13 @@ def lab(browser, tmp_path_factory):
 
 
 @pytest.fixture
-def page(browser):
+def page(browser, lab):
     p = browser.new_page(viewport={"width": 1280, "height": 1000})
     try:
         yield p
     finally:
         p.close()
+        lab.shutdown_kernels()
 
 
 def run_notebook(page, lab, name):
