@@ -58,11 +58,11 @@ def test_ensemble_replay_is_the_weighted_average_of_act():
 def tiny_dp():
     torch = pytest.importorskip("torch")
     from coursekit.experts.pusht_planner import collect_dataset
-    from coursekit.policies.factory import make_pusht_policy
+    from coursekit.policies import make_policy
 
     torch.manual_seed(0)
     data = collect_dataset(2, seed=0, progress=False)
-    policy, _ = make_pusht_policy("diffusion", data, batch_size=4, seed=0)
+    policy, _, _ = make_policy("diffusion", data, batch_size=4, seed=0)
     return policy
 
 

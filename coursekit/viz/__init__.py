@@ -8,15 +8,15 @@ name below pulls its module (and that module's heavy imports) on first use.
     MujocoMeshcat, export_mujoco_rollout  any MuJoCo model in meshcat                   (mujoco_meshcat)
     show_html                           an exported page inline in a notebook          (notebook)
     screenshot_html, find_chromium      headless-chromium screenshots                  (browser)
+    MetricsLog, plot_metrics            a training run's metrics.csv and loss.png      (run_log)
+    EpisodeRecording, write_replay      evaluated episodes as an HTML replay + frames  (replay)
     TeleopWidget                        push the T with the mouse, recorded            (teleop_widget)
     FigureScrubber                      sliders that redraw one figure in place        (widgets, widgets_chunks)
 """
 
 from __future__ import annotations
 
-import importlib
-import importlib.util
-from typing import Any
+from coursekit.lazy import lazy_loader
 
 _LAZY = {
     "MeshcatScene": "coursekit.viz.meshcat_scene",
@@ -29,19 +29,12 @@ _LAZY = {
     "screenshot_html": "coursekit.viz.browser",
     "find_chromium": "coursekit.viz.browser",
     "ChromiumNotFoundError": "coursekit.viz.browser",
+    "MetricsLog": "coursekit.viz.run_log",
+    "plot_metrics": "coursekit.viz.run_log",
+    "EpisodeRecording": "coursekit.viz.replay",
+    "write_replay": "coursekit.viz.replay",
     "TeleopWidget": "coursekit.viz.teleop_widget",
     "FigureScrubber": "coursekit.viz.widgets",
 }
 __all__ = sorted(_LAZY)
-
-
-def __getattr__(name: str) -> Any:
-    if name in _LAZY:
-        return getattr(importlib.import_module(_LAZY[name]), name)
-    if not name.startswith("_") and importlib.util.find_spec(f"{__name__}.{name}") is not None:
-        return importlib.import_module(f"{__name__}.{name}")  # a submodule, e.g. coursekit.viz.pusht_plots
-    raise AttributeError(f"module 'coursekit.viz' has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return __all__
+__getattr__, __dir__ = lazy_loader(__name__, _LAZY, submodules=True)
