@@ -172,18 +172,31 @@ class LabPage:
         self.page.locator(".lm-MenuBar-itemLabel", has_text=menu).first.click()
         self.page.locator(".lm-Menu-itemLabel", has_text=item).first.click()
 
+    def prompts(self) -> list[str]:
+        return self.page.locator(".jp-CodeCell .jp-InputPrompt").all_inner_texts()
+
     def run_all(self, timeout_s: float) -> None:
-        """Run > Run All Cells, then wait until no cell is queued or running."""
-        self.page.locator(".jp-Notebook").first.click()
-        self.command("Run", "Run All Cells")
+        """Run > Run All Cells, then wait until no cell is queued or running.
+
+        The menu command is issued again (up to three times) when no cell has started 30 s
+        later: a click can land while the page is still busy settling.
+        """
         deadline = time.monotonic() + timeout_s
-        time.sleep(1.0)
+        for _attempt in range(3):
+            self.page.locator(".jp-Notebook").first.click()
+            self.command("Run", "Run All Cells")
+            started = time.monotonic() + 30
+            while time.monotonic() < started and all(p.strip() in ("[ ]:", "") for p in self.prompts()):
+                time.sleep(0.5)
+            if not all(p.strip() in ("[ ]:", "") for p in self.prompts()):
+                break
         while time.monotonic() < deadline:
-            prompts = self.page.locator(".jp-CodeCell .jp-InputPrompt").all_inner_texts()
-            if prompts and not any("*" in p for p in prompts) and all("[" in p and p.strip() != "[ ]:" for p in prompts):
+            prompts = self.prompts()
+            if prompts and not any("*" in p for p in prompts) and all(p.strip() not in ("[ ]:", "") for p in prompts):
                 return
             time.sleep(1.0)
-        raise TimeoutError(f"{self.name}: cells still running after {timeout_s} s; prompts {prompts}")
+        self.page.screenshot(path=str(self.server.root / f"timeout-{self.name}.png"))
+        raise TimeoutError(f"{self.name}: cells still running after {timeout_s} s; prompts {self.prompts()}")
 
     def save_and_read(self) -> dict:
         """Save the notebook from the browser and return the executed notebook JSON from disk."""
