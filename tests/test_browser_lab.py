@@ -113,13 +113,17 @@ def scrub_changes_figure(page, cell_has: str, images: str) -> None:
     before = imgs.first.get_attribute("src")
     assert before, "the widget shows no figure"
     handle = cell.locator(".noUi-handle").first
-    handle.click()
-    for _ in range(3):
-        handle.press("ArrowRight")
-    deadline = time.monotonic() + 60
-    while imgs.first.get_attribute("src") == before and time.monotonic() < deadline:
-        time.sleep(0.3)
-    assert imgs.first.get_attribute("src") != before, "moving the slider did not change the figure"
+    for _attempt in range(3):  # keyboard focus can be lost to a re-render: focus and press again
+        handle.focus()
+        for _ in range(3):
+            handle.press("ArrowRight")
+        deadline = time.monotonic() + 20
+        while imgs.first.get_attribute("src") == before and time.monotonic() < deadline:
+            time.sleep(0.3)
+        if imgs.first.get_attribute("src") != before:
+            return
+    value = cell.locator(".widget-readout").first.inner_text()
+    raise AssertionError(f"moving the slider (readout now {value!r}) did not change the figure")
 
 
 def test_chapter0_runs_and_its_meshcat_views_draw(page, lab):
