@@ -202,17 +202,21 @@ def _maybe_ship(out: Path, name: str, args: argparse.Namespace) -> tuple[Path, s
 
 def bench_dp_cube(args: argparse.Namespace) -> None:
     """Diffusion Policy on transfer cube with the same state features, receding horizon."""
-    from coursekit.checkpoint import load_checkpoint
+    from coursekit.checkpoint import load_checkpoint, read_checkpoint_info
     from coursekit.evaluate import evaluate_aloha
     from coursekit.policies import make_policy
     from coursekit.train import TrainConfig
 
-    ds = _dataset("transfer_cube", args)
-    policy, batches, recipe = make_policy("diffusion", ds, features="aloha_state", recipe="cpu", seed=args.seed)
-    out = Path(args.ckpt_dir) / "dp_transfer_cube"
-    summary = _train(policy, batches, TrainConfig(**recipe, minutes=args.minutes, num_threads=args.threads,
-                                                  progress=not args.no_progress), out, ds.meta)
-    out, shipped = _maybe_ship(out, "dp_transfer_cube", args)
+    if args.checkpoint:  # re-evaluate a trained checkpoint (e.g. the shipped one) without training
+        out, shipped = Path(args.checkpoint), f"; evaluated: {args.checkpoint}"
+        summary = read_checkpoint_info(out)["training"]
+    else:
+        ds = _dataset("transfer_cube", args)
+        policy, batches, recipe = make_policy("diffusion", ds, features="aloha_state", recipe="cpu", seed=args.seed)
+        out = Path(args.ckpt_dir) / "dp_transfer_cube"
+        summary = _train(policy, batches, TrainConfig(**recipe, minutes=args.minutes, num_threads=args.threads,
+                                                      progress=not args.no_progress), out, ds.meta)
+        out, shipped = _maybe_ship(out, "dp_transfer_cube", args)
     policy = load_checkpoint(out, device="cpu")
     n = 3 if args.quick else args.episodes
     r = evaluate_aloha(policy, "transfer_cube", n_episodes=n, progress=not args.no_progress,
@@ -221,7 +225,8 @@ def bench_dp_cube(args: argparse.Namespace) -> None:
     print(f"DP transfer cube: strict {r.info['strict_success_rate']:.2f}, stages {[rates[s] for s in range(1, 5)]}")
     if not args.no_record:
         record(SECTION, "DP transfer cube success (strict, DDIM-10, Ta=8)", round(100 * r.info["strict_success_rate"], 1),
-               "%", f"{COMMAND} --only dp_cube --minutes {args.minutes:g} --threads {args.threads}" + (" --ship" if args.ship else ""),
+               "%", f"{COMMAND} --only dp_cube " + (f"--checkpoint {args.checkpoint}" if args.checkpoint else
+                                                    f"--minutes {args.minutes:g} --threads {args.threads}" + (" --ship" if args.ship else "")),
                note=f"{n} held-out episodes; stages 1-4: "
                f"{', '.join(f'{rates[s]:.2f}' for s in range(1, 5))}; trained {summary['steps']} steps / "
                f"{summary['seconds'] / 60:.1f} min on {summary.get('torch_threads')} thread(s) (cpu recipe), "
@@ -272,7 +277,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--repeats", type=int, default=15, help="latency repeats (default 15)")
     parser.add_argument("--latency-threads", type=int, default=None, help="torch threads for the latency section (default: torch's)")
     parser.add_argument("--seed", type=int, default=0, help="training seed (default 0)")
-    parser.add_argument("--checkpoint", default=None, help="evaluate this ACT checkpoint instead of training (cube/insertion)")
+    parser.add_argument("--checkpoint", default=None, help="evaluate this checkpoint instead of training (cube, insertion: ACT; dp_cube: Diffusion Policy)")
     parser.add_argument("--data-dir", default="outputs/data", help="where demonstrations are cached")
     parser.add_argument("--ckpt-dir", default="outputs/checkpoints", help="where trained checkpoints are written")
     parser.add_argument("--ship", action="store_true",
@@ -286,6 +291,8 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     if args.quick and args.ship:
         parser.error("--ship with --quick would ship a smoke-run model over coursekit/checkpoints/; drop one of them")
+    if args.ship and args.checkpoint:
+        parser.error("--ship copies a freshly trained model; with --checkpoint nothing is trained: drop one of them")
     if args.quick:
         args.minutes = min(args.minutes, 0.5)
         args.repeats = min(args.repeats, 3)
