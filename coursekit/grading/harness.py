@@ -94,7 +94,10 @@ class ReportPlugin:
         if call.excinfo is not None:
             exc = call.excinfo.value
             report = getattr(exc, "report", None) or f"{type(exc).__name__}: {exc}"
-            self.errors[(item.nodeid, call.when)] = (report, failure_kind(exc, report), getattr(exc, "traceback", ""))
+            # the student's own traceback when their code failed (none for a timeout or a crash: the
+            # test's frames inside the grader would only be noise); the test's for a failed comparison
+            student_tb = getattr(exc, "traceback", None)
+            self.errors[(item.nodeid, call.when)] = (report, failure_kind(exc, report), student_tb)
 
     def pytest_runtest_logstart(self, nodeid, location) -> None:
         self._send(event="start", test=self.names.get(nodeid, nodeid))
@@ -109,7 +112,7 @@ class ReportPlugin:
             if report.skipped and isinstance(report.longrepr, tuple):
                 text = str(report.longrepr[2])
             message, kind, student_tb = self.errors.get((report.nodeid, report.when)) or (
-                crash.message if crash is not None else text, "value", "")
+                crash.message if crash is not None else text, "value", None)
             if report.when == "setup":
                 message = f"could not set up the test: {_first_line(message)}"
             state["message"] = _first_line(message)
@@ -117,7 +120,7 @@ class ReportPlugin:
             state["cause"] = kind if kind in ("error", "timeout", "crashed", "memory", "output", "reference",
                                               "protocol") else ""
             # the student's own traceback when their code raised; else the test's (short) one
-            state["detail"] = _tail(student_tb or text)
+            state["detail"] = _tail(text if student_tb is None else student_tb)
         for name, value in report.user_properties:
             if name == "student_output" and value:
                 state["output"] = _tail(state["output"] + value)

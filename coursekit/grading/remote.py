@@ -144,6 +144,7 @@ class Sandbox:
         self.deadline = min(time.monotonic() + self.test_timeout, self.budget_end)
         with self.output_lock:
             self.output.clear()
+            self.printed = 0  # the output limit is per test
 
     def output_tail(self) -> str:
         with self.output_lock:
@@ -281,7 +282,7 @@ class Sandbox:
                     self.output.extend(chunk)
                     if len(self.output) > 4 * OUTPUT_TAIL:
                         del self.output[: len(self.output) - OUTPUT_TAIL]
-                self.printed += len(chunk)
+                    self.printed += len(chunk)
                 if self.printed > limit and proc is not None:
                     self.over_output = proc
                     _kill(proc)
@@ -348,7 +349,7 @@ class Sandbox:
                 self.kill()
                 if deadline >= self.budget_end:
                     self._raise_if_spent()
-                raise StudentCodeError("timeout", "Timeout", f"(>{self.test_timeout:g}s) while {during}: your code "
+                raise StudentCodeError("timeout", "", f"Timeout (>{self.test_timeout:g}s) while {during}: your code "
                                        "did not return in time (an endless loop?)")
             if now >= next_poll:
                 next_poll = now + 0.5
