@@ -79,6 +79,8 @@ class GradeSummary:
     warnings: list[str] = field(default_factory=list)
     mode: str = "bwrap"
     """"bwrap" (each worker in its own sandbox) or "none" (not isolated)."""
+    tag: str = ""
+    """COURSEKIT_WORKER value in every worker's environment (to find leftovers)."""
 
 
 def _student_id(name: str, taken: set[str]) -> str:
@@ -221,7 +223,7 @@ def grade_submissions(submissions: str | Path, out: str | Path, exercises: list[
                 students[sid].grades = future.result()
                 write_student(out, students[sid])  # a finished student is saved at once
 
-    summary = GradeSummary(list(students.values()), chosen, out, time.monotonic() - start, mode=mode)
+    summary = GradeSummary(list(students.values()), chosen, out, time.monotonic() - start, mode=mode, tag=tag)
     after = _fingerprint(root, chosen)
     for path, digest in before.items():
         if after.get(path) != digest:

@@ -114,6 +114,9 @@ def bwrap_command(exe: str, module_dir: Path, disk_mb: int, blanked: list[tuple[
     cmd = [exe, "--unshare-all", "--unshare-user", "--die-with-parent", "--new-session", "--cap-drop", "ALL",
            "--uid", "65534", "--gid", "65534", "--hostname", "sandbox", "--clearenv"]
     fds: list[int] = []
+    # the private tmpfs first: a library or interpreter under /tmp is then bound on top of it
+    cmd.extend(["--dev", "/dev", "--proc", "/proc", "--size", str(int(disk_mb) * 1024 * 1024), "--tmpfs", "/tmp",
+                "--dir", "/tmp/home", "--dir", "/tmp/work"])
 
     def bind(path: str, dest: str | None = None) -> None:
         fd = os.open(path, os.O_PATH | os.O_CLOEXEC)
@@ -135,8 +138,6 @@ def bwrap_command(exe: str, module_dir: Path, disk_mb: int, blanked: list[tuple[
         cache = Path(dest).parent / "__pycache__"
         if cache.is_dir():  # the compiled original must not be readable either
             cmd.extend(["--tmpfs", str(cache)])
-    cmd.extend(["--dev", "/dev", "--proc", "/proc", "--size", str(int(disk_mb) * 1024 * 1024), "--tmpfs", "/tmp",
-                "--dir", "/tmp/home", "--dir", "/tmp/work"])
     if module_dir.is_dir():
         bind(str(module_dir), "/submission")
     cmd.extend(["--chdir", "/tmp/work"])

@@ -243,7 +243,7 @@ def main() -> int:
     except BaseException as exc:  # noqa: BLE001 - the library itself failed to import: report it
         worker.send({"kind": "booted", "error": f"{type(exc).__name__}: {exc}"})
         return 1
-    worker.send({"kind": "booted", "error": ""})
+    worker.send({"kind": "booted", "error": ""})  # from here on the student's code runs
     try:
         from coursekit.grading.loader import load_exercise
 
@@ -256,6 +256,6 @@ def main() -> int:
         worker.send({"kind": "ready"})
     try:
         worker.serve()
-    except (EOFError, protocol.ProtocolError):
+    except (EOFError, OSError, protocol.ProtocolError):  # the trusted side is gone or closed the channel
         return 0
     return 0
