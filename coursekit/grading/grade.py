@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from coursekit.grading.paths import repo_root
-from coursekit.grading.registry import EXERCISES, Exercise, exercise_number, get_exercise
+from coursekit.grading.registry import EXERCISES, Exercise, get_exercise
 from coursekit.grading.runner import Limits, RunResult, read_test_sources, run_tests
 from coursekit.grading.scoring import TestScore, exercise_status, score_exercise
 from coursekit.io import atomic_write_text

@@ -35,77 +35,14 @@ from pathlib import Path
 from typing import Any
 
 from coursekit.grading import protocol, sandbox
+from coursekit.grading.proxy import RemoteAttr, RemoteModule, RemoteObject, StudentCodeError  # noqa: F401 - re-exported
+from coursekit.grading.sandbox import become_subreaper, kill_orphans, kill_process, tree_usage
 from coursekit.grading.registry import get_exercise
 
 OUTPUT_TAIL = 4000
 """Characters of printed output kept per test."""
-
-
-class StudentCodeError(AssertionError):
-    """The student's code raised, or the worker running it failed; ``cause`` says which.
-
-    ``cause``: "error" (an exception, ``kind`` is its type), "import" (the module failed to import),
-    "timeout", "crashed" (the process ended), "memory", "output" (printed too much),
-    "reference" (called the reference implementation / imported solutions), "protocol".
-    """
-
-    def __init__(self, cause: str, kind: str, message: str, traceback: str = "") -> None:
-        super().__init__(message)
-        self.cause, self.kind, self.message, self.traceback = cause, kind, message, traceback
-
-    @property
-    def report(self) -> str:
-        """One line: "ValueError: bad shape", "Timeout (>1s): ...", "calls the reference implementation (...)"."""
-        return f"{self.kind}: {self.message}" if self.kind else self.message
-
-
-class RemoteObject:
-    """A handle to an object living in the worker: call it, read attributes, pass it back in."""
-
-    def __init__(self, box: "Sandbox", generation: int, oid: int, type_name: str) -> None:
-        object.__setattr__(self, "_box", box)
-        object.__setattr__(self, "_gen", generation)
-        object.__setattr__(self, "_id", oid)
-        object.__setattr__(self, "type_name", type_name)
-
-    def __call__(self, *args, **kwargs):
-        return self._box.request("call", target=self, args=list(args), kwargs=kwargs)
-
-    def __getattr__(self, name: str):
-        if name.startswith("__"):
-            raise AttributeError(name)
-        return self._box.request("getattr", target=self, name=name)
-
-    def __setattr__(self, name, value):
-        raise AttributeError("objects in the worker are read-only from the tests (use sandbox.load_state_dict)")
-
-    def __repr__(self) -> str:
-        return f"<remote {self.type_name} #{self._id}>"
-
-
-class RemoteAttr:
-    """A name in the student's module (resolved in the worker each time it is used)."""
-
-    def __init__(self, box: "Sandbox", name: str) -> None:
-        self._box, self.name = box, name
-
-    def __call__(self, *args, **kwargs):
-        return self._box.request("call", target=self, args=list(args), kwargs=kwargs)
-
-    def __repr__(self) -> str:
-        return f"<student's {self.name}>"
-
-
-class RemoteModule:
-    """The student's module as the tests see it: ``student.<name>(...)`` runs in the worker."""
-
-    def __init__(self, box: "Sandbox") -> None:
-        self._box = box
-
-    def __getattr__(self, name: str) -> RemoteAttr:
-        if name.startswith("_"):
-            raise AttributeError(name)
-        return RemoteAttr(self._box, name)
+MAX_PROCESSES = 64
+"""A worker tree with more processes than this is stopped (polled; RLIMIT_NPROC also applies where it binds)."""
 
 
 class Sandbox:
@@ -137,7 +74,7 @@ class Sandbox:
         self.over_output = None
         self.reap = reap
         if reap:
-            _become_subreaper()
+            become_subreaper()
 
     # ----------------------------------------------------------------- per test
     def start_test(self) -> None:
@@ -285,7 +222,7 @@ class Sandbox:
                     self.printed += len(chunk)
                 if self.printed > limit and proc is not None:
                     self.over_output = proc
-                    _kill(proc)
+                    kill_process(proc)
         except OSError:
             return
         finally:
@@ -293,7 +230,7 @@ class Sandbox:
 
     def kill(self) -> None:
         if self.proc is not None:
-            _kill(self.proc)
+            kill_process(self.proc)
             for fd in (self.req_w, self.rep_r):
                 try:
                     os.close(fd)
@@ -301,7 +238,7 @@ class Sandbox:
                     pass
             self.proc = None
         if self.reap:
-            _kill_orphans()
+            kill_orphans()
 
     def close(self) -> None:
         self.kill()
@@ -353,10 +290,14 @@ class Sandbox:
                                        "did not return in time (an endless loop?)")
             if now >= next_poll:
                 next_poll = now + 0.5
-                if self.proc is not None and _tree_rss_mb(self.proc.pid) > 1.5 * self.memory_mb:
+                rss_mb, n_procs = tree_usage(self.proc.pid) if self.proc is not None else (0.0, 0)
+                if rss_mb > 1.5 * self.memory_mb:
                     self.kill()
                     raise StudentCodeError("memory", "", f"used more than {1.5 * self.memory_mb:g} MiB of memory "
                                            "and was stopped")
+                if n_procs > MAX_PROCESSES:
+                    self.kill()
+                    raise StudentCodeError("crashed", "", f"started more than {MAX_PROCESSES} processes and was stopped")
             ready, _, _ = select.select([self.rep_r], [], [], min(0.1, max(deadline - now, 0.001)))
             if not ready:
                 continue
@@ -429,56 +370,3 @@ class Sandbox:
             self._send({"op": "cb_error", "message": f"{type(exc).__name__}: {exc}"})
         else:
             self._send({"op": "cb_result", "value": value})
-
-
-def _kill(proc: subprocess.Popen) -> None:
-    for target in (lambda: os.killpg(proc.pid, signal.SIGKILL), proc.kill):
-        try:
-            target()
-        except (ProcessLookupError, PermissionError, OSError):
-            pass
-    try:
-        proc.wait(timeout=10)
-    except subprocess.TimeoutExpired:
-        pass
-
-
-def _become_subreaper() -> None:
-    """Orphans of a worker (a double-forked daemon) become our children, so we can end them."""
-    if not sys.platform.startswith("linux"):
-        return
-    try:
-        import ctypes
-
-        ctypes.CDLL(None, use_errno=True).prctl(36, 1, 0, 0, 0)  # PR_SET_CHILD_SUBREAPER
-    except (OSError, AttributeError):
-        pass
-
-
-def _kill_orphans() -> None:
-    """SIGKILL every remaining descendant of this process (workers' leftovers)."""
-    try:
-        import psutil
-
-        for child in psutil.Process().children(recursive=True):
-            try:
-                child.kill()
-            except psutil.Error:
-                pass
-        for child in psutil.Process().children(recursive=False):
-            try:
-                child.wait(timeout=1)
-            except psutil.Error:
-                pass
-    except Exception:  # noqa: BLE001 - best effort (psutil missing, races)
-        pass
-
-
-def _tree_rss_mb(pid: int) -> float:
-    try:
-        import psutil
-
-        proc = psutil.Process(pid)
-        return sum(p.memory_info().rss for p in [proc, *proc.children(recursive=True)]) / 2**20
-    except Exception:  # noqa: BLE001 - the process may be gone between the calls
-        return 0.0

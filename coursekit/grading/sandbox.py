@@ -22,6 +22,7 @@ from __future__ import annotations
 import functools
 import os
 import shutil
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -144,3 +145,58 @@ def bwrap_command(exe: str, module_dir: Path, disk_mb: int, blanked: list[tuple[
     for key, value in (env or {}).items():
         cmd.extend(["--setenv", key, value])
     return cmd + argv, fds
+
+
+def kill_process(proc: subprocess.Popen) -> None:
+    for target in (lambda: os.killpg(proc.pid, signal.SIGKILL), proc.kill):
+        try:
+            target()
+        except (ProcessLookupError, PermissionError, OSError):
+            pass
+    try:
+        proc.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        pass
+
+
+def become_subreaper() -> None:
+    """Orphans of a worker (a double-forked daemon) become our children, so we can end them."""
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(36, 1, 0, 0, 0)  # PR_SET_CHILD_SUBREAPER
+    except (OSError, AttributeError):
+        pass
+
+
+def kill_orphans() -> None:
+    """SIGKILL every remaining descendant of this process (workers' leftovers)."""
+    try:
+        import psutil
+
+        for child in psutil.Process().children(recursive=True):
+            try:
+                child.kill()
+            except psutil.Error:
+                pass
+        for child in psutil.Process().children(recursive=False):
+            try:
+                child.wait(timeout=1)
+            except psutil.Error:
+                pass
+    except Exception:  # noqa: BLE001 - best effort (psutil missing, races)
+        pass
+
+
+def tree_usage(pid: int) -> tuple[float, int]:
+    """(resident MiB, process count) of the worker's whole tree (bwrap's own processes included)."""
+    try:
+        import psutil
+
+        proc = psutil.Process(pid)
+        procs = [proc, *proc.children(recursive=True)]
+        return sum(p.memory_info().rss for p in procs) / 2**20, len(procs)
+    except Exception:  # noqa: BLE001 - the process may be gone between the calls
+        return 0.0, 0
