@@ -8,6 +8,7 @@ README between the ``<!-- results:start -->`` and ``<!-- results:end -->`` marke
 from __future__ import annotations
 
 import json
+import os
 import platform
 import time
 from pathlib import Path
@@ -27,14 +28,32 @@ def load() -> dict:
 
 
 def record(section: str, name: str, value: float | str, unit: str, command: str,
-           target: str = "", note: str = "") -> None:
-    """Store one measured figure (and re-render the README table)."""
-    table = load()
-    table[f"{section}/{name}"] = {
+           target: str = "", note: str = "", interval: tuple[float, float] | None = None,
+           n: int | None = None, seeds: str = "") -> None:
+    """Store one measured figure (and re-render the README table).
+
+    Evaluation figures also give ``interval`` (95 %, in the figure's own unit: see
+    :mod:`coursekit.stats`), ``n`` (episodes behind it) and ``seeds`` (which seeds, e.g.
+    "100000-100199", so a reader can tell protocol seeds from validation seeds).
+    """
+    entry = {
         "section": section, "name": name, "value": value, "unit": unit, "target": target,
         "command": command, "note": note, "measured": time.strftime("%Y-%m-%d"),
-        "machine": f"{platform.machine()}, {__import__('os').cpu_count()} cores",
+        "machine": f"{platform.machine()}, {os.cpu_count()} cores",
     }
+    if interval is not None:
+        lo, hi = (float(v) for v in interval)
+        if not lo <= float(value) <= hi:
+            raise ValueError(f"interval {interval!r} does not contain the value {value!r} ({section}/{name})")
+        entry["interval"] = [lo, hi]
+    if n is not None:
+        if isinstance(n, bool) or int(n) != n or n <= 0:
+            raise ValueError(f"n must be a positive integer, got {n!r} ({section}/{name})")
+        entry["n"] = int(n)
+    if seeds:
+        entry["seeds"] = seeds
+    table = load()
+    table[f"{section}/{name}"] = entry
     atomic_write_text(RESULTS, json.dumps(table, indent=1, sort_keys=True) + "\n")
     render_readme()
 
@@ -46,11 +65,18 @@ def _fmt(v: float | str) -> str:
 
 
 def render_table() -> str:
-    rows = ["| section | figure | value | target | conditions | command |", "|---|---|---|---|---|---|"]
+    rows = ["| section | figure | value | 95 % interval (n) | target | conditions | command |",
+            "|---|---|---|---|---|---|---|"]
     for entry in sorted(load().values(), key=lambda e: (e["section"], e["name"])):
         val = f"{_fmt(entry['value'])} {entry['unit']}".strip()
+        ci = ""
+        if "interval" in entry:
+            lo, hi = entry["interval"]
+            ci = f"[{_fmt(lo)}, {_fmt(hi)}]"
+        if "n" in entry:
+            ci = f"{ci} (n={entry['n']}{', seeds ' + entry['seeds'] if entry.get('seeds') else ''})".strip()
         note = entry.get("note", "").replace("|", "/")
-        rows.append(f"| {entry['section']} | {entry['name']} | {val} | {entry['target']} | {note} "
+        rows.append(f"| {entry['section']} | {entry['name']} | {val} | {ci} | {entry['target']} | {note} "
                     f"(measured {entry['measured']}) | `{entry['command']}` |")
     return "\n".join(rows)
 

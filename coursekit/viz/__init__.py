@@ -8,6 +8,8 @@ name below pulls its module (and that module's heavy imports) on first use.
     MujocoMeshcat, export_mujoco_rollout  any MuJoCo model in meshcat                   (mujoco_meshcat)
     show_html                           an exported page inline in a notebook          (notebook)
     screenshot_html, find_chromium      headless-chromium screenshots                  (browser)
+    MetricsLog, plot_metrics            a training run's metrics.csv and loss.png      (run_log)
+    EpisodeRecording, write_replay      evaluated episodes as an HTML replay + frames  (replay)
 """
 
 from __future__ import annotations
@@ -27,6 +29,10 @@ _LAZY = {
     "screenshot_html": "coursekit.viz.browser",
     "find_chromium": "coursekit.viz.browser",
     "ChromiumNotFoundError": "coursekit.viz.browser",
+    "MetricsLog": "coursekit.viz.run_log",
+    "plot_metrics": "coursekit.viz.run_log",
+    "EpisodeRecording": "coursekit.viz.replay",
+    "write_replay": "coursekit.viz.replay",
 }
 __all__ = sorted(_LAZY)
 
