@@ -104,3 +104,16 @@ def test_partial_credit_hints_by_failure_kind_and_hidden_tests():
     assert secret.hidden and secret.max_points == 2 and secret.points == 0
     assert secret.hint == secret.message == secret.detail == "", "a hidden test shows name, points and pass/fail only"
     assert exercise_status(exercise, outcomes) == "timeout"
+
+
+def test_one_wrong_function_fails_only_its_own_tests(tmp_path):
+    """Issue 18: the epsilon_loss tests use the REFERENCE q_sample, so a wrong q_sample does not cascade."""
+    source = (repo_root() / "solutions" / "noise_loss.py").read_text()
+    broken = source.replace("def q_sample(", "def q_sample(*args, **kwargs):\n    raise ValueError('broken q_sample')\n\n\ndef _unused(", 1)
+    assert broken != source
+    (tmp_path / "noise_loss.py").write_text(broken)
+    result = coursekit.check("noise_loss", tmp_path, show=False)
+    by_name = {s.name: s for s in result.scores}
+    assert all(not s.passed and "broken q_sample" in s.message for n, s in by_name.items() if n.startswith("test_q_sample"))
+    assert all(s.passed for n, s in by_name.items() if n.startswith("test_epsilon_loss")), \
+        [(n, s.message) for n, s in by_name.items() if not s.passed]

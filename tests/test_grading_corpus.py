@@ -83,12 +83,19 @@ def test_every_student_gets_the_expected_row(graded):
         row = rows[student]
         assert float(row["chunk_windows"]) == points and float(row["total"]) == points, (student, row)
         assert row["max"] == "10"
+        assert row["folder"] == next(p.name for p in (out.parent / "submissions").iterdir() if p.stem == student)
         grade = next(s for s in summary.students if s.student == student).grades[0]
         if status is not None:
             assert grade.status == status, (student, grade.status, grade.reason)
         feedback = (out / student / "feedback.md").read_text()
         assert text in feedback, f"{student}: {text!r} not in feedback:\n{feedback[:3000]}"
     assert summary.warnings == []
+    # feedback never shows this machine's paths; a traceback shared by every test is shown once
+    for student in EXPECTED:
+        feedback = (out / student / "feedback.md").read_text()
+        assert str(repo_root()) not in feedback and "/tmp/" not in feedback, (student, feedback[:2000])
+    stub = (out / "untouched_stub" / "feedback.md").read_text()
+    assert stub.count("NotImplementedError: Exercise 1.1") >= 7 and stub.count("the same as in `") == 6
     # bounded (loose: the machine may be busy): the budget is dominated by the endless loops
     assert summary.seconds < 300
 

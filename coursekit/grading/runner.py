@@ -285,6 +285,7 @@ def _hidden_exercise(data: bytes) -> str:
 
 _ADDRESS = re.compile(r" at 0x[0-9a-fA-F]+")
 _HANDLE = re.compile(r"#\d{6,}>")
+_SUBMISSION = re.compile(r"(?<=\")[^\"\s]*/submission/")
 
 
 def _scrub(result: RunResult, scratch: Path) -> None:
@@ -300,7 +301,7 @@ def _scrub(result: RunResult, scratch: Path) -> None:
         for text in (o.message, o.detail, o.output):
             for prefix, new in prefixes:
                 text = text.replace(prefix, new)
-            text = re.sub(r"/tmp/pytest-of-[^/\s]+/pytest-\d+/worker\d*/worker-\d+/", "", text)
+            text = _SUBMISSION.sub("", text)  # "/submission/chunk_windows.py" -> "chunk_windows.py"
             text = _HANDLE.sub("#...>", _ADDRESS.sub(" at 0x...", text))
             texts.append(text)
         o.message, o.detail, o.output = texts

@@ -224,7 +224,11 @@ class Worker:
             if isinstance(chain, ReferenceCalled):
                 reference = reference or str(chain)
             chain = chain.__cause__ or chain.__context__
-        tb = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__, limit=-8))
+        # start the traceback at the student's own code: the worker's frames above it are noise
+        frames, student_file = exc.__traceback__, getattr(self.module, "__file__", None)
+        while frames is not None and student_file and frames.tb_frame.f_code.co_filename != student_file:
+            frames = frames.tb_next
+        tb = "".join(traceback.format_exception(type(exc), exc, frames or exc.__traceback__, limit=8))
         return {"kind": "error", "type": type(exc).__name__, "message": str(exc)[:2000], "traceback": tb[-4000:],
                 "reference": reference}
 
