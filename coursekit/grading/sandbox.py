@@ -116,8 +116,9 @@ def bwrap_command(exe: str, module_dir: Path, disk_mb: int, blanked: list[tuple[
            "--uid", "65534", "--gid", "65534", "--hostname", "sandbox", "--clearenv"]
     fds: list[int] = []
     # the private tmpfs first: a library or interpreter under /tmp is then bound on top of it
-    cmd.extend(["--dev", "/dev", "--proc", "/proc", "--size", str(int(disk_mb) * 1024 * 1024), "--tmpfs", "/tmp",
-                "--dir", "/tmp/home", "--dir", "/tmp/work"])
+    # /dev read-only (its device nodes still work): bwrap's /dev is a tmpfs the sandbox user owns
+    cmd.extend(["--dev", "/dev", "--remount-ro", "/dev", "--proc", "/proc",
+                "--size", str(int(disk_mb) * 1024 * 1024), "--tmpfs", "/tmp", "--dir", "/tmp/home", "--dir", "/tmp/work"])
 
     def bind(path: str, dest: str | None = None) -> None:
         fd = os.open(path, os.O_PATH | os.O_CLOEXEC)
@@ -137,8 +138,8 @@ def bwrap_command(exe: str, module_dir: Path, disk_mb: int, blanked: list[tuple[
         cmd.extend(["--ro-bind-data", str(fd), dest])
         fds.append(fd)
         cache = Path(dest).parent / "__pycache__"
-        if cache.is_dir():  # the compiled original must not be readable either
-            cmd.extend(["--tmpfs", str(cache)])
+        if cache.is_dir():  # the compiled original must not be readable either: an empty read-only tmpfs
+            cmd.extend(["--size", "4096", "--tmpfs", str(cache), "--remount-ro", str(cache)])
     if module_dir.is_dir():
         bind(str(module_dir), "/submission")
     cmd.extend(["--chdir", "/tmp/work"])
