@@ -114,6 +114,7 @@ def test_one_wrong_function_fails_only_its_own_tests(tmp_path):
     (tmp_path / "noise_loss.py").write_text(broken)
     result = coursekit.check("noise_loss", tmp_path, show=False)
     by_name = {s.name: s for s in result.scores}
-    assert all(not s.passed and "broken q_sample" in s.message for n, s in by_name.items() if n.startswith("test_q_sample"))
+    assert all(not s.passed and "broken q_sample" in s.message for n, s in by_name.items() if n.startswith("test_q_sample")), \
+        [(n, s.message) for n, s in by_name.items()]
     assert all(s.passed for n, s in by_name.items() if n.startswith("test_epsilon_loss")), \
         [(n, s.message) for n, s in by_name.items() if not s.passed]

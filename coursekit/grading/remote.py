@@ -60,6 +60,9 @@ class Sandbox:
         self.budget_end = time.monotonic() + budget
         self.budget = budget
         self.deadline = self.budget_end
+        self.test_left = test_timeout
+        """Seconds of the current test's timeout not yet spent WAITING on the worker (the test's own
+        work, e.g. importing diffusers or computing a reference, does not count)."""
         self.proc: subprocess.Popen | None = None
         self.generation = 0
         self.sticky: StudentCodeError | None = None  # an import-time failure: the same for every test
@@ -78,7 +81,7 @@ class Sandbox:
 
     # ----------------------------------------------------------------- per test
     def start_test(self) -> None:
-        self.deadline = min(time.monotonic() + self.test_timeout, self.budget_end)
+        self.test_left = self.test_timeout
         with self.output_lock:
             self.output.clear()
             self.printed = 0  # the output limit is per test
@@ -206,8 +209,6 @@ class Sandbox:
             self.import_error = self._error(ready, "import")
         elif ready.get("kind") != "ready":
             raise StudentCodeError("protocol", "", f"unexpected message from the worker: {str(ready)[:200]}")
-        # starting the worker (torch's import on a busy machine) does not count against the test
-        self.deadline = max(self.deadline, min(time.monotonic() + self.test_timeout, self.budget_end))
 
     def _drain(self, fd: int) -> None:
         limit = self.output_mb * 1024 * 1024
@@ -338,11 +339,15 @@ class Sandbox:
 
     def request(self, op: str, **fields) -> Any:
         """Send one request and serve callbacks until its reply; the reply's value (or StudentCodeError)."""
+        waiting = False
         try:
             if self.proc is None or self.proc.poll() is not None:
                 self._start()
             if self.import_error is not None:
                 raise self.import_error
+            # starting the worker (torch's import on a busy machine) does not count against the test
+            self.deadline = min(time.monotonic() + max(self.test_left, 0.0), self.budget_end)
+            waiting = True
             self._send({"op": op, **fields})
             while True:
                 reply = self._receive(self.deadline)
@@ -354,13 +359,18 @@ class Sandbox:
                 if kind == "error":
                     raise self._error(reply)
                 if kind == "callback":
+                    started = time.monotonic()
                     self._callback(reply)
+                    self.deadline = min(self.deadline + time.monotonic() - started, self.budget_end)  # the test's time
                     continue
                 self.kill()
                 raise StudentCodeError("protocol", "", f"unexpected message from the worker: {str(reply)[:200]}")
         except StudentCodeError as exc:
             self.causes.append(exc.cause)
             raise
+        finally:
+            if waiting:
+                self.test_left = self.deadline - time.monotonic()
 
     def _callback(self, reply: dict) -> None:
         fn = self.callbacks.get(reply.get("id"))
