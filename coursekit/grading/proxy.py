@@ -5,10 +5,7 @@ See :mod:`coursekit.grading.remote` for the worker behind them.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:
-    from coursekit.grading.remote import Sandbox
+from typing import Any
 
 
 class StudentCodeError(AssertionError):
@@ -32,7 +29,7 @@ class StudentCodeError(AssertionError):
 class RemoteObject:
     """A handle to an object living in the worker: call it, read attributes, pass it back in."""
 
-    def __init__(self, box: "Sandbox", generation: int, oid: int, type_name: str) -> None:
+    def __init__(self, box: Any, generation: int, oid: int, type_name: str) -> None:
         object.__setattr__(self, "_box", box)
         object.__setattr__(self, "_gen", generation)
         object.__setattr__(self, "_id", oid)
@@ -56,7 +53,7 @@ class RemoteObject:
 class RemoteAttr:
     """A name in the student's module (resolved in the worker each time it is used)."""
 
-    def __init__(self, box: "Sandbox", name: str) -> None:
+    def __init__(self, box: Any, name: str) -> None:
         self._box, self.name = box, name
 
     def __call__(self, *args, **kwargs):
@@ -69,7 +66,7 @@ class RemoteAttr:
 class RemoteModule:
     """The student's module as the tests see it: ``student.<name>(...)`` runs in the worker."""
 
-    def __init__(self, box: "Sandbox") -> None:
+    def __init__(self, box: Any) -> None:
         self._box = box
 
     def __getattr__(self, name: str) -> RemoteAttr:
