@@ -1,6 +1,6 @@
 """Temporal ensembling: query the policy every step and average every chunk's guess for now.
 
-ACT (Zhao et al. 2023, Sec. III-B, Fig. 5) predicts a chunk of k actions at every control step
+ACT (Zhao et al. 2023, Sec. IV-A, Fig. 5) predicts a chunk of k actions at every control step
 instead of every k steps. At time t, up to k chunks (made at steps t-k+1 ... t) each hold one
 prediction for time t; the executed action is their weighted average::
 
@@ -75,6 +75,11 @@ class TemporalEnsemble:
         self._history: np.ndarray | None = None  # (B, To, Do)
         self._chunks: list[tuple[int, np.ndarray]] = []  # (step made at, (B, Tp - start, Da))
         self.t = 0
+
+    @classmethod
+    def from_spec(cls, predict_chunk: Callable[[Any], Any], spec: Any) -> TemporalEnsemble:
+        """The executor every policy builds: To and m from an :class:`~coursekit.execution.spec.ExecutionSpec`."""
+        return cls(predict_chunk, n_obs_steps=int(spec.n_obs_steps), ensemble_decay=float(spec.ensemble_decay))
 
     def reset(self, obs: Any) -> None:
         """Start an episode: history = To copies of ``obs`` (B, Do); forget every chunk."""

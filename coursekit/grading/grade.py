@@ -36,7 +36,7 @@ from coursekit.grading.paths import repo_root
 from coursekit.grading.registry import EXERCISES, Exercise, get_exercise
 from coursekit.grading.runner import Limits, RunResult, read_test_sources, run_tests
 from coursekit.grading.scoring import TestScore, exercise_status, score_exercise
-from coursekit.io import atomic_write_text
+from coursekit.atomic import atomic_write_text
 
 _SAFE = re.compile(r"[^A-Za-z0-9._-]+")
 

@@ -28,7 +28,7 @@ from pathlib import Path
 from coursekit.grading.paths import repo_root
 from coursekit.grading.registry import EXERCISES, get_exercise
 from coursekit.grading.runner import Limits
-from coursekit.io import atomic_write_text
+from coursekit.atomic import atomic_write_text
 
 SETUP = """#!/usr/bin/env bash
 # Gradescope image build (Ubuntu, root): bubblewrap, Python >= 3.11 and the pinned environment.

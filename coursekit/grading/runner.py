@@ -19,7 +19,6 @@ import re
 import secrets
 import select
 import shutil
-import signal
 import subprocess
 import sys
 import tempfile
@@ -27,13 +26,12 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from coursekit.grading.child import _kill_group, _pump
 from coursekit.grading.paths import repo_root
 from coursekit.grading.registry import Exercise
 
 MAX_MODULE_BYTES = 2 * 1024 * 1024
 """A submitted module larger than this is not graded (nobody writes 2 MB of Python for these)."""
-MAX_PIPE_BYTES = 8 * 1024 * 1024
-"""The parent stops storing result messages beyond this many bytes."""
 
 # The child imports the very coursekit this process runs (an editable install, a clone on
 # PYTHONPATH, ...): `python -I` ignores PYTHONPATH and the current folder, so the path is explicit.
@@ -130,33 +128,6 @@ def _copy_submission(exercises: list[Exercise], submission: Path, dest: Path) ->
         src = submission / f"{exercise.id}.py"
         if src.is_file() and not src.is_symlink() and src.stat().st_size <= MAX_MODULE_BYTES:
             shutil.copyfile(src, dest / src.name)
-
-
-def _kill_group(proc: subprocess.Popen) -> None:
-    """SIGKILL the trusted process's session (its workers die with it: --die-with-parent)."""
-    try:
-        os.killpg(proc.pid, signal.SIGKILL)
-    except (ProcessLookupError, PermissionError):
-        pass
-    try:
-        proc.kill()
-    except ProcessLookupError:
-        pass
-    proc.wait()
-
-
-def _pump(fd: int, buffer: bytearray, received: list[int]) -> bool:
-    """Read what is available from ``fd`` into ``buffer``; False at end of file."""
-    try:
-        chunk = os.read(fd, 65536)
-    except BlockingIOError:
-        return True
-    if not chunk:
-        return False
-    if received[0] < MAX_PIPE_BYTES:
-        buffer.extend(chunk[: MAX_PIPE_BYTES - received[0]])
-    received[0] += len(chunk)
-    return True
 
 
 def run_tests(exercises: list[Exercise], submission: str | os.PathLike, limits: Limits | None = None,
