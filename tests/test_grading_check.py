@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 import coursekit
 from coursekit.cli import main
 from coursekit.grading.paths import repo_root
@@ -118,3 +120,21 @@ def test_one_wrong_function_fails_only_its_own_tests(tmp_path):
         [(n, s.message) for n, s in by_name.items()]
     assert all(s.passed for n, s in by_name.items() if n.startswith("test_epsilon_loss")), \
         [(n, s.message) for n, s in by_name.items() if not s.passed]
+
+
+def test_without_bwrap_grading_says_so_once(tmp_path, monkeypatch, capsys):
+    import shutil
+
+    from coursekit.grading import sandbox
+    from coursekit.grading.grade import grade_submissions
+
+    for name in ("ann", "ben"):
+        (tmp_path / "subs" / name).mkdir(parents=True)
+        shutil.copy(repo_root() / "solutions" / "chunk_windows.py", tmp_path / "subs" / name)
+    monkeypatch.setenv(sandbox.MODE_ENV, "none")
+    summary = grade_submissions(tmp_path / "subs", tmp_path / "out", ["chunk_windows"], jobs=2, progress=False)
+    assert summary.mode == "none" and all(s.points == 10 for s in summary.students)
+    assert capsys.readouterr().out.count(sandbox.NOT_ISOLATED) == 1
+    monkeypatch.setenv(sandbox.MODE_ENV, "sometimes")
+    with pytest.raises(ValueError, match="COURSEKIT_SANDBOX must be auto, bwrap or none, got 'sometimes'"):
+        sandbox.mode()
