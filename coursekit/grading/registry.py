@@ -181,6 +181,35 @@ EXERCISES: tuple[Exercise, ...] = (
             "test_start_offset_for_diffusion_policy": (1, "Store chunk[:, self.start:] so index 0 of a stored chunk is the step it was made at."),
         },
     ),
+    Exercise(
+        id="flow_loss",
+        chapter=10,
+        title="The flow-matching loss: sample t, interpolate, regress the velocity",
+        source="coursekit.flow.loss",
+        objects=("sample_flow_time", "flow_matching_loss"),
+        tests={
+            "test_times_in_range_and_shape": (1, "Return n float times in [0.001, 1): t = 0.001 + 0.999 * s."),
+            "test_uniform_times_are_uniform": (1, "kind 'uniform': s = u with u = torch.rand(n, generator=generator)."),
+            "test_beta_times_follow_beta_1_5_1": (2, "kind 'beta': s = u ** (2/3), the inverse of the Beta(1.5, 1) CDF s^1.5."),
+            "test_times_use_the_generator": (1, "Draw u with torch.rand(..., generator=generator, device=device) so a seed repeats the times."),
+            "test_model_sees_the_interpolated_chunk": (2, "x_t = t * noise + (1 - t) * a0 with t reshaped to (B, 1, ..., 1); call velocity_model(x_t, t, cond)."),
+            "test_loss_matches_closed_form": (2, "target u = noise - a0; loss = mean((velocity_model(x_t, t, cond) - u)^2), a 0-d tensor."),
+            "test_loss_backpropagates": (1, "Use torch ops only (no .item(), no numpy) so gradients reach the model."),
+        },
+    ),
+    Exercise(
+        id="euler_step",
+        chapter=10,
+        title="One Euler step of the flow ODE",
+        source="coursekit.flow.sampler",
+        objects=("euler_step",),
+        tests={
+            "test_step_closed_form": (2, "x_next = x_t + dt * velocity_model(x_t, t_vec, cond)."),
+            "test_model_gets_time_as_a_batch_vector": (2, "Pass t as a (B,) tensor of x_t's dtype and device, every entry t: torch.full((B,), t)."),
+            "test_exact_on_a_constant_field": (1, "N steps of dt = -1/N on v = c move x by exactly -c."),
+            "test_first_order_on_a_linear_field": (2, "Euler on dx/dt = x gives x1 * (1 - 1/N)^N after N steps."),
+        },
+    ),
 )
 
 
