@@ -8,7 +8,7 @@ from torch import nn
 
 
 class Scale(nn.Module):
-    """eps_model(x_t, t, cond) = w * x_t: one scalar parameter ``w``."""
+    """A model (x_t, t, cond) -> w * x_t (noise or velocity prediction): one scalar parameter ``w``."""
 
     def __init__(self, w: float) -> None:
         super().__init__()

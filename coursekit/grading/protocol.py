@@ -10,7 +10,9 @@ J bytes of JSON, then the raw bytes of every array the JSON mentions, in order. 
   becomes its plain CPU values (``torch``: decode as a tensor), a subclass becomes its base class;
 - ``{"t": "obj", "id": n, "type": "module.Class"}``: a handle to an object that stays in the
   worker (a FiLM layer, an executor, a bound method); ``{"t": "attr", "name": s}``: an attribute
-  of the student's module; ``{"t": "cb", "id": n}``: a callable that stays on the trusted side.
+  of the student's module; ``{"t": "cb", "id": n}``: a callable that stays on the trusted side;
+  ``{"t": "gen", "state": <uint8 array>}``: a torch.Generator (trusted -> worker only), rebuilt
+  from its state so the worker draws the same numbers the test's generator would.
 
 Decoding builds fresh base-class objects from the JSON and the bytes, checks every dtype, shape
 and length against the frame, and caps depth and size, so whatever the worker sends, the
@@ -87,6 +89,8 @@ def encode(value: Any, obj_ref: Callable[[Any], dict] | None = None, cb_ref: Cal
             if t.dtype == torch.bfloat16:
                 t = t.float()
             return array(t.resolve_conj().resolve_neg().numpy(), True, bool(mark_grad and v.requires_grad))
+        if torch is not None and isinstance(v, torch.Generator):  # its state crosses; the copy draws the same numbers
+            return {"t": "gen", "state": enc(v.get_state(), depth + 1)}
         if isinstance(v, (np.ndarray, np.generic)):
             out = array(v, False, False)
             if isinstance(v, np.generic):
@@ -116,7 +120,7 @@ def encode(value: Any, obj_ref: Callable[[Any], dict] | None = None, cb_ref: Cal
 
 
 def decode(payload: bytes, obj: Callable[[dict], Any] | None = None, cb: Callable[[dict], Any] | None = None,
-           attr: Callable[[dict], Any] | None = None, as_torch: bool = True) -> Any:
+           attr: Callable[[dict], Any] | None = None, as_torch: bool = True, generators: bool = False) -> Any:
     """Plain data from one frame's payload (the part after the 8-byte length)."""
     if len(payload) < 4:
         raise ProtocolError("truncated message")
@@ -179,6 +183,15 @@ def decode(payload: bytes, obj: Callable[[dict], Any] | None = None, cb: Callabl
             return cb(v)
         if tag == "attr" and attr is not None and type(v.get("name")) is str:
             return attr(v)
+        if tag == "gen" and generators:  # worker side only: a torch.Generator rebuilt from its state
+            import torch
+
+            state = dec(v.get("state"), depth + 1)
+            if not isinstance(state, torch.Tensor) or state.dtype != torch.uint8:
+                raise ProtocolError("bad generator state")
+            generator = torch.Generator()
+            generator.set_state(state)
+            return generator
         raise ProtocolError(f"unexpected value {str(v)[:100]}")
 
     value = dec(tree, 0)

@@ -117,7 +117,7 @@ class Worker:
 
         payload = protocol.read_frame_blocking(REQUEST_FD)
         return protocol.decode(payload, obj=lambda v: self.objects[v["id"]], cb=self._callback,
-                               attr=lambda v: getattr(self.module, v["name"]))
+                               attr=lambda v: getattr(self.module, v["name"]), generators=True)
 
     def _callback(self, spec: dict):
         def call_trusted(*args, **kwargs):
