@@ -1,8 +1,8 @@
 """``coursekit demo``: the end-to-end tour (what ``make demo`` runs), a few minutes on a laptop CPU.
 
 1. generate a handful of PushT demonstrations with the scripted expert and save them;
-2. replay one of them in a fresh environment (same actions, same trajectory: the physics is
-   deterministic) and check that it ends in success;
+2. replay one of them in a fresh environment (same reset seed, same actions: the same states bit
+   for bit, the physics is deterministic) and check that it ends in success;
 3. write the replay as a 3-D meshcat animation (one self-contained HTML file) and a matplotlib
    figure (the replayed pusher path; every demonstration's coverage over time) under ``--out``;
 4. print where everything is and how to open the course.
@@ -27,8 +27,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-progress", action="store_true", help="hide progress bars")
 
 
-def replay_episode(states, actions):
-    """Replay ``actions`` (T, 2) in a fresh PushTEnv from ``states[0]``.
+def replay_episode(states, actions, seed: int | None = None):
+    """Replay ``actions`` (T, 2) in a fresh PushTEnv.
+
+    With the episode's reset ``seed`` the env is reset exactly as when it was recorded and the
+    replay reproduces every state bit for bit. Without one, the T is placed at ``states[0]``
+    with ``set_state``, which is close but not exact: the reset's physics substep can leave
+    hidden solver state (see ``PushTEnv.set_state``), and pushing is chaotic.
 
     Returns (replayed states (T, 7) [ax, ay, bx, by, angle, vx, vy], coverage (T,) after each
     action, largest |position difference| (px) to the recorded states (T, 5)).
@@ -38,10 +43,13 @@ def replay_episode(states, actions):
     from coursekit.envs.pusht import PushTEnv
 
     env = PushTEnv()
-    env.reset()
-    # set_state puts the T exactly at the recorded pose (angle set before position); the
-    # reset option "reset_to_state" would apply the reference's LEGACY order and shift the T.
-    env.set_state(np.asarray(states[0][:5], dtype=np.float64))
+    if seed is not None:
+        env.reset(seed=int(seed))
+    else:
+        env.reset()
+        # set_state puts the T exactly at the recorded pose (angle set before position); the
+        # reset option "reset_to_state" would apply the reference's LEGACY order and shift the T.
+        env.set_state(np.asarray(states[0][:5], dtype=np.float64))
     replayed, coverage = [env.get_state()], []
     for action in actions:
         _, _, _, _, info = env.step(action)  # the raw env keeps stepping after success: the rest steps
@@ -118,7 +126,8 @@ def run(args: argparse.Namespace) -> int:
 
     print(f"[2/4] replaying demonstration {args.replay} in a fresh environment ...")
     episode = dataset.episode(args.replay)
-    replayed, coverage, drift = replay_episode(episode["state"], episode["action"])
+    replayed, coverage, drift = replay_episode(episode["state"], episode["action"],
+                                               seed=dataset.meta["episode_seeds"][args.replay])
     print(f"      {len(replayed)} steps, final coverage {coverage[-1]:.3f} "
           f"({'success' if coverage.max() > 0.95 else 'NOT a success'}); "
           f"largest drift from the recorded states {drift:.2e} px")

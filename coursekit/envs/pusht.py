@@ -171,10 +171,18 @@ class PushTEnv(gym.Env):
         The angle is set BEFORE the position, so the block lands exactly at (bx, by, angle)
         (pymunk rotates bodies about their centre of gravity; compare the legacy order in
         ``reset``). The block's own velocity is zeroed and pymunk's cached contact impulses are
-        cleared, so ``set_state(s); step(a)`` is a pure function of (s, a). (The block's velocity
-        left by the last contact of a real episode is not part of the state, so a copy taken
-        mid-push can differ from the original by a fraction of a unit over the next step.)
-        Does not touch the step counter or the episode's reward bookkeeping.
+        cleared. Does not touch the step counter or the episode's reward bookkeeping.
+
+        NOT a full copy (measured): Chipmunk keeps per-body BIAS velocities from the last
+        substep's penetration correction (used by the next substep's position update, cleared
+        after it, not reachable through pymunk) and the block's velocity from the last contact.
+        After a substep with overlap (a reset whose pusher starts inside the T or whose T starts
+        in a wall, or any push) ``set_state(s); step(a)`` can therefore differ from a fresh env
+        placed at s by a fraction of a unit, which an open-loop replay through contacts grows to
+        tens of px (0-21 px measured for expert episodes). Nothing depends on memory layout or
+        on other envs in the process: the same history gives the same result. For an exact
+        replay, reset a fresh env the way the episode was reset (same ``seed`` or
+        ``reset_to_state``) and apply the recorded actions (``coursekit.teleop.replay``).
         """
         s = self._check_state(state)
         space = self._space
