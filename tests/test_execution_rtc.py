@@ -116,6 +116,17 @@ def test_euler_guidance_weight_is_rtc_weight_in_pi0_time():
     assert EulerHead.guidance_weight(1.0, 5.0) == 5.0
 
 
+def test_ddim_guidance_is_pigdm_unclipped_and_rtc_clipped():
+    from coursekit.policies.inpainting import DDIMHead
+
+    for abar in (0.02, 0.5, 0.9, 0.999):
+        # PiGDM: score += g / r^2 with r^2 = 1 - abar, and eps = -sqrt(1 - abar) score -> eps -= g / sqrt(1 - abar)
+        assert DDIMHead.guidance_scale(abar, 1e9) == pytest.approx(1 / math.sqrt(1 - abar))
+        tau = math.sqrt(abar) / (math.sqrt(abar) + math.sqrt(1 - abar))  # the rescaled flow time
+        r2 = (1 - tau) ** 2 / (tau ** 2 + (1 - tau) ** 2)
+        assert DDIMHead.guidance_scale(abar, 5.0) == pytest.approx(math.sqrt(abar) * min(5.0, (1 - tau) / (tau * r2)))
+
+
 @pytest.mark.parametrize("head", ["diffusion", "flow"])
 def test_guidance_pulls_the_overlap_toward_the_target(dp, head):
     obs = np.random.default_rng(3).uniform(100, 400, size=(4, 2, dp.config.obs_dim)).astype(np.float32)

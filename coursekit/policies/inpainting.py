@@ -6,11 +6,15 @@ vector-Jacobian product g, the loop). Here are the two samplers seen one step at
 DDIM on epsilon (Diffusion Policy)::
 
     x0_hat = (x_t - sqrt(1 - abar_t) eps) / sqrt(abar_t)              (unclipped: the clamp has no gradient)
-    eps'   = eps - sqrt(1 - abar_t) * min(beta, 1 / r_t^2) * g,   r_t^2 = 1 - abar_t
+    eps'   = eps - sqrt(abar_t) * min(beta, 1 / sqrt(abar_t (1 - abar_t))) * g
     x_prev = the policy's own sampler step with eps'                    (DDIM, or DDPM)
 
-(score = -eps / sqrt(1 - abar_t); PiGDM adds g / r_t^2 to the score, with r_t^2 = 1 - abar_t
-the variance of x0 given x_t under a unit prior; its weight is clipped at beta like RTC's.)
+Unclipped this is PiGDM exactly: score = -eps / sqrt(1 - abar_t), and PiGDM adds g / r_t^2 to
+the score with r_t^2 = 1 - abar_t, i.e. eps' = eps - g / sqrt(1 - abar_t). The clip is RTC's, on
+the same quantity RTC clips: rescaled, x_t is a flow iterate at tau = sqrt(abar) / (sqrt(abar) +
+sqrt(1 - abar)), where RTC's weight (1 - tau) / (tau r^2) equals 1 / sqrt(abar (1 - abar)).
+(Clipping 1 / r_t^2 itself instead would all but switch guidance off in the last, low-noise
+steps, where 1 / r_t^2 is in the hundreds and the chunk takes its final shape.)
 
 Euler on velocity (flow matching, pi0's convention: x_t = t e + (1 - t) a0, t = 1 noise, v = e - a0)::
 
@@ -52,11 +56,17 @@ class DDIMHead:
         eps = self.eps_model(x, torch.full((x.shape[0],), t, dtype=torch.long, device=x.device), self.cond)
         return (x - (1.0 - abar_t).sqrt() * eps) / abar_t.sqrt(), eps
 
+    @staticmethod
+    def guidance_scale(abar: float, max_guidance: float) -> float:
+        """sqrt(abar) * min(beta, 1 / sqrt(abar (1 - abar))): the factor of g subtracted from eps."""
+        if abar >= 1.0:
+            return 0.0
+        return abar ** 0.5 * min(float(max_guidance), 1.0 / (abar * (1.0 - abar)) ** 0.5)
+
     def step(self, x: torch.Tensor, k: int, eps: torch.Tensor, g: torch.Tensor | None, max_guidance: float) -> torch.Tensor:
         t = self.timesteps[k]
         if g is not None:
-            r2 = 1.0 - float(self.sampler.schedule.alphas_cumprod[t])
-            eps = eps - (r2 ** 0.5) * min(max_guidance, 1.0 / r2) * g
+            eps = eps - self.guidance_scale(float(self.sampler.schedule.alphas_cumprod[t]), max_guidance) * g
         return self.sampler.step(eps, t, x, generator=self.generator)
 
 
