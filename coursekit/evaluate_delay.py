@@ -156,7 +156,7 @@ def smoothness(actions: np.ndarray, switches: Sequence[int] = ()) -> dict[str, f
     at_switch[idx] = True
     return {"max_step": float(step.max(axis=1).mean()),
             "switch_jump": float(step[:, at_switch].mean()) if at_switch.any() else float("nan"),
-            "other_step": float(step[:, ~at_switch].mean()),
+            "other_step": float(step[:, ~at_switch].mean()) if (~at_switch).any() else float("nan"),
             "max_jerk": float(jerk.max(axis=1).mean())}
 
 
