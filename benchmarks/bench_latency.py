@@ -102,7 +102,8 @@ def _threads() -> int:
 
 
 def _block_file(cache: Path, name: str, strategy: str, d: int, start: int, n: int, args: argparse.Namespace) -> Path:
-    tag = f"{name}_{strategy}_d{d}_s{start}_n{n}_seed{args.seed}_beta{args.max_guidance:g}"
+    rtc = f"_beta{args.max_guidance:g}_{args.prefix}" if strategy == "rtc" else ""
+    tag = f"{name}_{strategy}_d{d}_s{start}_n{n}_seed{args.seed}{rtc}"
     return cache / f"{tag}.json"
 
 
@@ -111,7 +112,7 @@ def run_block(policy, name: str, strategy: str, d: int, seeds: list[int], args: 
 
     _, task, sampling, _ = HEADS[name]
     r = evaluate_delayed(policy, task, strategy, d, seeds, seed=args.seed, sampling=sampling, record=True,
-                         max_guidance=args.max_guidance, progress=False)
+                         max_guidance=args.max_guidance, prefix=args.prefix, progress=False)
     out = {"seeds": seeds, "max_reward": r.max_reward.tolist(), "success": r.success.astype(int).tolist(),
            "smooth": smoothness(r.actions, r.info["switches"]), "seconds": r.seconds}
     if task != "pusht":
@@ -159,10 +160,11 @@ def _record_point(label, task, strategy, d, parts, args, bootstrap_interval, wil
     smooth = {k: float(np.average([p["smooth"][k] for p in parts], weights=[len(p["seeds"]) for p in parts]))
               for k in parts[0]["smooth"]}
     cmd = (f"{COMMAND} --only curves --heads {args.head_of[label]} --strategies {strategy} --d {d} "
-           f"--episodes {args.episodes} --seed-start {args.seed_start}")
+           f"--episodes {args.episodes} --seed-start {args.seed_start}"
+           f"{f' --max-guidance {args.max_guidance:g} --prefix {args.prefix}' if strategy == 'rtc' else ''}")
     note = (f"{n} held-out seeds{' (REDUCED run: the protocol is 200)' if n < 200 else ''}, sampling seed "
             f"{args.seed}, delay d={d} control steps, strategy {strategy}"
-            f"{f', RTC guidance clip {args.max_guidance:g}' if strategy == 'rtc' else ''}")
+            f"{f', RTC guidance clip {args.max_guidance:g}, prefix {args.prefix}' if strategy == 'rtc' else ''}")
     if task == "pusht":
         scores = np.array([x for p in parts for x in p["max_reward"]])
         lo, hi = bootstrap_interval(scores) if n > 1 else (scores[0], scores[0])
@@ -193,6 +195,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--block", type=int, default=50, help="seeds per cached block (the unit of resumption)")
     parser.add_argument("--seed", type=int, default=0, help="sampling seed (torch generator of every chunk's noise)")
     parser.add_argument("--max-guidance", type=float, default=5.0, help="RTC's guidance clip beta (paper: 5)")
+    parser.add_argument("--prefix", choices=["guide", "replace"], default="guide",
+                        help="RTC's frozen prefix: guided (the paper) or also replaced at every step (DP inpainting)")
     parser.add_argument("--repeats", type=int, default=7, help="latency: timed calls per head (median)")
     parser.add_argument("--threads", type=int, default=1, help="torch threads")
     parser.add_argument("--cache", default=os.path.join(os.environ.get("XDG_CACHE_HOME", "~/.cache"), "coursekit",

@@ -84,12 +84,14 @@ def _adapter(policy: Any, task: str) -> Any:
 def evaluate_delayed(policy: Any, task: str, strategy: str, delay: int, seeds: Sequence[int], *, seed: int = 0,
                      sampling: Mapping[str, Any] | None = None, max_steps: int | None = None, record: bool = False,
                      progress: bool = False, max_guidance: float = MAX_GUIDANCE, schedule: str = "exp",
-                     dataset_meta: dict[str, Any] | None = None) -> Any:
+                     prefix: str = "guide", dataset_meta: dict[str, Any] | None = None) -> Any:
     """Run ``policy`` on ``task`` from each of ``seeds`` with ``strategy`` under a delay of ``delay`` steps.
 
     Returns the task's :class:`~coursekit.evaluate.EvalResult`; ``info`` names the strategy, d,
     the sampling options and seed, the RTC calls and their time, and (``record=True``) the
-    executor's chunk switch steps (``info["switches"]``) for :func:`smoothness`.
+    executor's chunk switch steps (``info["switches"]``) for :func:`smoothness`. RTC options:
+    ``max_guidance`` (beta), ``schedule`` ("exp" or "hard") and ``prefix`` ("guide" or "replace",
+    see :func:`coursekit.policies.inpainting.predict_inpainted`).
     """
     import torch
 
@@ -113,7 +115,7 @@ def evaluate_delayed(policy: Any, task: str, strategy: str, delay: int, seeds: S
     def guided_chunk(obs_history: Any, target: Any, weights: Any, frozen: int) -> Any:
         t0 = time.perf_counter()
         out = predict_inpainted(policy, obs_history, target, weights, frozen=frozen, generator=generator,
-                                max_guidance=max_guidance, **sampling)
+                                max_guidance=max_guidance, prefix=prefix, **sampling)
         guided["seconds"] += time.perf_counter() - t0
         guided["calls"] += 1
         return out
@@ -131,6 +133,8 @@ def evaluate_delayed(policy: Any, task: str, strategy: str, delay: int, seeds: S
                      desc=f"{policy.policy_type} {strategy} d={delay}")
     result.info.update({"policy_type": policy.policy_type, "task": task, "strategy": strategy, "delay": int(delay),
                         "max_steps": steps, "sampling_seed": int(seed), **sampling,
+                        **({"max_guidance": max_guidance, "schedule": schedule, "prefix": prefix}
+                           if strategy == "rtc" else {}),
                         "guided_calls": guided["calls"], "guided_seconds": round(guided["seconds"], 3),
                         **adapter.metrics(result)})
     if record:

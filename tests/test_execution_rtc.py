@@ -196,3 +196,25 @@ def test_rtc_committed_prefix_equals_previous_chunk_on_pusht(dp):
         committed = np.stack([prev.action_at(new.request + j) for j in range(d)], axis=1)  # (B, d, Da)
         np.testing.assert_array_equal(new.actions[:, :d], committed)
     assert np.isfinite(res.actions).all()
+
+
+def test_replace_prefix_carries_the_target_along_its_own_noise():
+    from coursekit.diffusion import DDIMSampler
+    from coursekit.policies.inpainting import DDIMHead
+
+    policy = tiny_dp()
+    y, e = torch.randn(1, 16, 2), torch.randn(1, 16, 2)
+    ddim = DDIMHead(policy.unet, DDIMSampler(policy.schedule, 4), torch.zeros(1, 12))
+    abar = policy.schedule.alphas_cumprod[ddim.timesteps[0] - ddim.sampler.step_ratio]
+    torch.testing.assert_close(ddim.noised(y, e, 0), abar.sqrt() * y + (1 - abar).sqrt() * e)
+    torch.testing.assert_close(ddim.noised(y, e, ddim.num_steps - 1), y)  # past the last step: clean
+    euler = EulerHead(ToyFlow().velocity, torch.zeros(1, 12), 4)
+    torch.testing.assert_close(euler.noised(y, e, 0), 0.75 * e + 0.25 * y)
+    torch.testing.assert_close(euler.noised(y, e, 3), y)
+    obs = np.random.default_rng(0).uniform(0, 500, size=(2, 2, 6)).astype(np.float32)
+    target = np.random.default_rng(1).uniform(0, 500, size=(2, 5, 2))
+    out = predict_inpainted(policy, obs, target, rtc_weights(5, 2, 5), frozen=2, prefix="replace",
+                            generator=torch.Generator().manual_seed(0))
+    np.testing.assert_array_equal(out[:, 1:3], target[:, :2].astype(out.dtype))
+    with pytest.raises(ValueError, match="prefix"):
+        predict_inpainted(policy, obs, target, np.zeros(5), prefix="paste")

@@ -95,15 +95,24 @@ class GuidedHead(Protocol):
     def step(self, x: Any, k: int, model_out: Any, g: Any, max_guidance: float) -> Any:
         """Step k: the next iterate from x, the model output and the guidance VJP g (zero: unguided)."""
 
+    def noised(self, clean: Any, noise: Any, k: int) -> Any:
+        """A clean chunk carried to the noise level after step k along ``noise`` (for ``replace``)."""
 
-def sample_guided(head: GuidedHead, x: Any, target: Any, weights: Any, max_guidance: float = MAX_GUIDANCE) -> Any:
+
+def sample_guided(head: GuidedHead, x: Any, target: Any, weights: Any, max_guidance: float = MAX_GUIDANCE,
+                  replace: Any = None) -> Any:
     """Run ``head`` from noise ``x`` (B, Tp, Da) to a chunk, guided toward ``target`` with ``weights``.
 
     All-zero weights skip the backward pass: the result is then the plain sampler's, bit for bit.
+    ``replace`` (Tp,) bool, optional: after every step those indices of the iterate are overwritten
+    by ``head.noised(target, x_start, k)``, the target carried to the step's noise level along its
+    own noise (Diffusion Policy's inpainting, Chi et al. 2023; a departure from RTC, which only
+    guides; off by default).
     """
     import torch
 
     guided = bool((weights != 0).any())
+    x_start = x
     for k in range(head.num_steps):
         if guided:
             _, out, g = guidance_vjp(lambda z: head.clean(z, k), x, target, weights)
@@ -113,6 +122,8 @@ def sample_guided(head: GuidedHead, x: Any, target: Any, weights: Any, max_guida
             g = None
         with torch.no_grad():
             x = head.step(x, k, out, g, max_guidance)
+            if replace is not None and bool(replace.any()):
+                x = torch.where(replace.view(1, -1, 1), head.noised(target, x_start, k), x)
     return x
 
 

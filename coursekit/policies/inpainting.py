@@ -41,6 +41,9 @@ import torch
 from coursekit.execution.rtc import MAX_GUIDANCE, sample_guided
 
 
+PREFIX_MODES = ("guide", "replace")
+
+
 class DDIMHead:
     """A diffusion policy's sampler (DDIM or DDPM) with PiGDM guidance on epsilon."""
 
@@ -68,6 +71,12 @@ class DDIMHead:
         if g is not None:
             eps = eps - self.guidance_scale(float(self.sampler.schedule.alphas_cumprod[t]), max_guidance) * g
         return self.sampler.step(eps, t, x, generator=self.generator)
+
+    def noised(self, clean: torch.Tensor, noise: torch.Tensor, k: int) -> torch.Tensor:
+        """sqrt(abar_prev) clean + sqrt(1 - abar_prev) noise: the level x_prev of step k is at."""
+        prev = self.sampler.previous_timestep(self.timesteps[k])
+        abar = self.sampler.schedule.alphas_cumprod[prev].to(clean) if prev >= 0 else torch.ones((), dtype=clean.dtype)
+        return abar.sqrt() * clean + (1.0 - abar).sqrt() * noise
 
 
 class EulerHead:
@@ -97,10 +106,15 @@ class EulerHead:
             v = v - self.guidance_weight(t, max_guidance) * g
         return x + (t_next - t) * v
 
+    def noised(self, clean: torch.Tensor, noise: torch.Tensor, k: int) -> torch.Tensor:
+        """t_next noise + (1 - t_next) clean: the straight path's point after step k."""
+        t_next = self.grid[k + 1]
+        return t_next * noise + (1.0 - t_next) * clean
+
 
 def predict_inpainted(policy: Any, obs_history: Any, target: Any, weights: Any, *, frozen: int = 0,
                       generator: torch.Generator | None = None, max_guidance: float = MAX_GUIDANCE,
-                      offset: int | None = None, **sampling: Any) -> Any:
+                      offset: int | None = None, prefix: str = "guide", **sampling: Any) -> Any:
     """A chunk (B, Tp, Da) from ``policy`` whose steps ``offset + j`` are guided toward ``target[:, j]``.
 
     Args:
@@ -112,11 +126,16 @@ def predict_inpainted(policy: Any, obs_history: Any, target: Any, weights: Any, 
         generator: draws the starting noise (and DDPM's step noise), as ``predict_chunk`` does.
         max_guidance: beta, the clip of the guidance weight (RTC: 5).
         offset: chunk index of target[:, 0] (default To - 1: the action for "now").
+        prefix: "guide" (RTC: the frozen prefix is held by guidance with W = 1) or "replace"
+            (also overwrite the iterate's frozen prefix at every step with the committed actions
+            at that step's noise level: Diffusion Policy's inpainting; a departure from RTC).
         sampling: the policy's sampling options (diffusion: sampler, num_inference_steps;
             flow: num_inference_steps).
     Returns raw actions, numpy if the history was numpy.
     """
     kind = getattr(policy, "policy_type", "")
+    if prefix not in PREFIX_MODES:
+        raise ValueError(f"prefix must be one of {PREFIX_MODES}, got {prefix!r}")
     unknown = sorted(set(sampling) - {"sampler", "num_inference_steps"})
     if unknown:
         raise ValueError(f"predict_inpainted takes the sampling options sampler and num_inference_steps, got {unknown}")
@@ -157,7 +176,11 @@ def predict_inpainted(policy: Any, obs_history: Any, target: Any, weights: Any, 
             if method != "euler":
                 raise ValueError(f"real-time chunking on a flow policy integrates with Euler, got sampler {method!r}")
             head = EulerHead(policy.velocity, cond, int(sampling.get("num_inference_steps") or c.num_inference_steps))
-        chunk_n = sample_guided(head, x, full_y, full_w, max_guidance)
+        replace = None
+        if prefix == "replace" and frozen:
+            replace = torch.zeros(c.horizon, dtype=torch.bool, device=dev)
+            replace[offset:offset + frozen] = True
+        chunk_n = sample_guided(head, x, full_y, full_w, max_guidance, replace=replace)
         if kind == "flow":
             chunk_n = chunk_n.clamp(-1.0, 1.0)  # as FlowMatchingPolicy.predict_chunk
     finally:
