@@ -156,6 +156,10 @@ def part_curves(args: argparse.Namespace) -> None:
 def _record_point(label, task, strategy, d, parts, args, bootstrap_interval, wilson_interval) -> None:
     seeds = [s for p in parts for s in p["seeds"]]
     n = len(seeds)
+    shown = strategy
+    if strategy == "rtc":  # variants get their own rows
+        shown += "" if args.prefix == "guide" else f" ({args.prefix} prefix)"
+        shown += "" if args.max_guidance == 5.0 else f" (clip {args.max_guidance:g})"
     span = f"{min(seeds)}-{max(seeds)}"
     smooth = {k: float(np.average([p["smooth"][k] for p in parts], weights=[len(p["seeds"]) for p in parts]))
               for k in parts[0]["smooth"]}
@@ -169,16 +173,16 @@ def _record_point(label, task, strategy, d, parts, args, bootstrap_interval, wil
         scores = np.array([x for p in parts for x in p["max_reward"]])
         lo, hi = bootstrap_interval(scores) if n > 1 else (scores[0], scores[0])
         value = round(float(scores.mean()), 3)
-        record(SECTION, f"{label}, {strategy}, d={d}: score", value, "", cmd, note=note,
-               interval=(min(lo, value), max(hi, value)), n=n, seeds=span)
+        record(SECTION, f"{label}, {shown}, d={d}: score", value, "", cmd, note=note,
+               interval=(min(round(lo, 3), value), max(round(hi, 3), value)), n=n, seeds=span)
     else:
         k = int(sum(x for p in parts for x in p["strict"]))
         lo, hi = wilson_interval(k, n)
         value = round(100.0 * k / n, 1)
-        record(SECTION, f"{label}, {strategy}, d={d}: strict success", value, "%", cmd, note=note,
-               interval=(min(100 * lo, value), max(100 * hi, value)), n=n, seeds=span)
+        record(SECTION, f"{label}, {shown}, d={d}: strict success", value, "%", cmd, note=note,
+               interval=(min(round(100 * lo, 1), value), max(round(100 * hi, 1), value)), n=n, seeds=span)
     unit = "px" if task == "pusht" else "rad"
-    record(SECTION, f"{label}, {strategy}, d={d}: smoothness",
+    record(SECTION, f"{label}, {shown}, d={d}: smoothness",
            f"jump at switches {smooth['switch_jump']:.1f} {unit} (other steps {smooth['other_step']:.1f}), "
            f"max jerk {smooth['max_jerk']:.1f} {unit}/step^3", "", cmd, note=note + "; means over episodes",
            n=n, seeds=span)
