@@ -288,16 +288,20 @@ class DelayedEnsemble(DelayedExecutor):
         super().reset(obs)
         self.chunks: list[Chunk] = []  # arrived chunks still covering the clock, oldest first
 
+    def _take_arrived(self) -> None:
+        """Move an arrived chunk into the ensemble (as float64 numpy, like TemporalEnsemble)."""
+        if self._receive():
+            self.current.actions = _to_numpy(self.current.actions)  # (B, L, Da)
+            self.chunks.append(self.current)
+
     def act(self, obs: Any) -> Any:
         self._observe(obs)
         t = self.t
-        for _ in range(2):  # receive; request if due; receive again (d = 0: at once)
-            if self._receive():
-                self.current.actions = _to_numpy(self.current.actions)
-                self.chunks.append(self.current)
-            if _ == 0 and self.pending is None and t >= self.next_request:
-                self._request()
-                self.next_request = t + max(1, self.delay)
+        self._take_arrived()
+        if self.pending is None and t >= self.next_request:
+            self._request()
+            self.next_request = t + max(1, self.delay)
+            self._take_arrived()  # d = 0 (or the first request): usable at once
         self.chunks = [c for c in self.chunks if t - c.request < c.length]
         if not self.chunks:
             return self._emit(self.last_action)

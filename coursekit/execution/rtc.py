@@ -36,6 +36,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from coursekit.execution.delay import AsyncChunking, _to_numpy
+from coursekit.execution.receding import stack_history
 
 MAX_GUIDANCE = 5.0
 """beta: RTC clips the guidance weight at 5."""
@@ -162,8 +163,6 @@ class RealTimeChunking(AsyncChunking):
         cur, d, r = self.current, self.delay, self.t
         if cur is None or (d == 0 and not self.guide_without_delay):
             return super()._compute()
-        from coursekit.execution.receding import stack_history
-
         overlap = max(0, cur.request + cur.length - r)  # steps r .. r + overlap - 1 the current chunk covers
         n = max(d, overlap)
         target = np.stack([_to_numpy(cur.action_at(r + j)) for j in range(n)], axis=1)  # (B, n, Da)
