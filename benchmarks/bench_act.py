@@ -37,11 +37,11 @@ import numpy as np
 import torch
 
 from benchmarks.results import record
+from coursekit.checkpoint import SHIPPED_DIR
 
 COMMAND = ".venv/bin/python -m benchmarks.bench_act"
 SECTION = "ACT"
 SECTIONS = ("latency", "cube", "insertion", "dp_cube", "act_pusht")
-SHIPPED_DIR = Path(__file__).resolve().parent.parent / "coursekit" / "checkpoints"
 TASK_LABEL = {"transfer_cube": "transfer cube", "insertion": "insertion"}
 COLLECT = {"transfer_cube": "collect_transfer_cube", "insertion": "collect_insertion"}
 
@@ -122,22 +122,24 @@ def _dataset(task: str, args: argparse.Namespace):
 
 
 def _train(policy: Any, batches: Any, config: Any, out: Path, meta: dict[str, Any]) -> dict[str, Any]:
+    from coursekit.checkpoint import CheckpointSaver
     from coursekit.train import train
 
-    result = train(policy, batches, config, out_dir=out, dataset_meta=meta)
+    result = train(policy, batches, config, callbacks=[CheckpointSaver(out, dataset_meta=meta)])
     return result.summary
 
 
 def _load_or_train_act(task: str, args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
     from coursekit.checkpoint import load_checkpoint, read_checkpoint_info
-    from coursekit.policies.act_factory import act_train_config, make_act_policy
+    from coursekit.policies import make_policy
+    from coursekit.train import TrainConfig
 
     if args.checkpoint:
         return load_checkpoint(args.checkpoint, device="cpu"), read_checkpoint_info(args.checkpoint)["training"]
     ds = _dataset(task, args)
-    policy, batches = make_act_policy(ds, batch_size=16, seed=args.seed)
-    config = act_train_config(minutes=args.minutes, num_threads=args.threads, progress=not args.no_progress,
-                              checkpoint_every_minutes=5.0)
+    policy, batches, recipe = make_policy("act", ds, recipe="cpu", seed=args.seed)  # batch 16
+    config = TrainConfig(**recipe, minutes=args.minutes, num_threads=args.threads, progress=not args.no_progress,
+                         checkpoint_every_minutes=5.0)
     out = Path(args.ckpt_dir) / f"act_{task}"
     summary = _train(policy, batches, config, out, {**ds.meta, "n_steps": ds.n_steps})
     print(f"trained ACT on {task}: {json.dumps({k: summary[k] for k in ('steps', 'seconds', 'final_loss')})} -> {out}")
@@ -146,7 +148,7 @@ def _load_or_train_act(task: str, args: argparse.Namespace) -> tuple[Any, dict[s
 
 def bench_aloha_act(task: str, args: argparse.Namespace) -> None:
     """Train (or load) ACT on an ALOHA task; evaluate with temporal ensembling on and off."""
-    from coursekit.evaluate_aloha import evaluate_aloha
+    from coursekit.evaluate import evaluate_aloha
     from coursekit.execution.ensembling import TemporalEnsemble
     from coursekit.execution.receding import RecedingHorizon
 
@@ -200,26 +202,21 @@ def _maybe_ship(out: Path, name: str, args: argparse.Namespace) -> tuple[Path, s
 
 def bench_dp_cube(args: argparse.Namespace) -> None:
     """Diffusion Policy on transfer cube with the same state features, receding horizon."""
-    from coursekit.checkpoint import load_checkpoint
-    from coursekit.data.act_batches import act_training_arrays
-    from coursekit.data.batches import WindowBatcher
-    from coursekit.evaluate_aloha import evaluate_aloha
-    from coursekit.policies.diffusion import DiffusionPolicy, DiffusionPolicyConfig
+    from coursekit.checkpoint import load_checkpoint, read_checkpoint_info
+    from coursekit.evaluate import evaluate_aloha
+    from coursekit.policies import make_policy
     from coursekit.train import TrainConfig
 
-    ds = _dataset("transfer_cube", args)
-    obs, action = act_training_arrays(ds, "aloha_state")
-    config = DiffusionPolicyConfig(features="aloha_state", obs_dim=obs["obs"].shape[-1], action_dim=action.shape[-1])
-    torch.manual_seed(args.seed)
-    policy = DiffusionPolicy(config)
-    policy.fit_normalizers(obs, action)
-    batches = WindowBatcher(obs, action, ds.episode_ends, horizon=config.horizon, n_obs_steps=config.n_obs_steps,
-                            n_action_steps=config.n_action_steps, batch_size=TrainConfig.recipe("cpu", max_steps=1).batch_size,
-                            seed=args.seed)
-    out = Path(args.ckpt_dir) / "dp_transfer_cube"
-    summary = _train(policy, batches, TrainConfig.recipe("cpu", minutes=args.minutes, num_threads=args.threads,
-                                                         progress=not args.no_progress), out, ds.meta)
-    out, shipped = _maybe_ship(out, "dp_transfer_cube", args)
+    if args.checkpoint:  # re-evaluate a trained checkpoint (e.g. the shipped one) without training
+        out, shipped = Path(args.checkpoint), f"; evaluated: {args.checkpoint}"
+        summary = read_checkpoint_info(out)["training"]
+    else:
+        ds = _dataset("transfer_cube", args)
+        policy, batches, recipe = make_policy("diffusion", ds, features="aloha_state", recipe="cpu", seed=args.seed)
+        out = Path(args.ckpt_dir) / "dp_transfer_cube"
+        summary = _train(policy, batches, TrainConfig(**recipe, minutes=args.minutes, num_threads=args.threads,
+                                                      progress=not args.no_progress), out, ds.meta)
+        out, shipped = _maybe_ship(out, "dp_transfer_cube", args)
     policy = load_checkpoint(out, device="cpu")
     n = 3 if args.quick else args.episodes
     r = evaluate_aloha(policy, "transfer_cube", n_episodes=n, progress=not args.no_progress,
@@ -228,7 +225,8 @@ def bench_dp_cube(args: argparse.Namespace) -> None:
     print(f"DP transfer cube: strict {r.info['strict_success_rate']:.2f}, stages {[rates[s] for s in range(1, 5)]}")
     if not args.no_record:
         record(SECTION, "DP transfer cube success (strict, DDIM-10, Ta=8)", round(100 * r.info["strict_success_rate"], 1),
-               "%", f"{COMMAND} --only dp_cube --minutes {args.minutes:g} --threads {args.threads}" + (" --ship" if args.ship else ""),
+               "%", f"{COMMAND} --only dp_cube " + (f"--checkpoint {args.checkpoint}" if args.checkpoint else
+                                                    f"--minutes {args.minutes:g} --threads {args.threads}" + (" --ship" if args.ship else "")),
                note=f"{n} held-out episodes; stages 1-4: "
                f"{', '.join(f'{rates[s]:.2f}' for s in range(1, 5))}; trained {summary['steps']} steps / "
                f"{summary['seconds'] / 60:.1f} min on {summary.get('torch_threads')} thread(s) (cpu recipe), "
@@ -240,7 +238,8 @@ def bench_act_pusht(args: argparse.Namespace) -> None:
     from coursekit.checkpoint import load_checkpoint
     from coursekit.data import EpisodeDataset
     from coursekit.evaluate import evaluate_pusht
-    from coursekit.policies.act_factory import act_train_config, make_act_policy
+    from coursekit.policies import make_policy
+    from coursekit.train import TrainConfig
 
     n_demo = 10 if args.quick else 200
     path = Path(args.data_dir) / f"pusht_{n_demo}ep_seed0.npz"
@@ -251,10 +250,10 @@ def bench_act_pusht(args: argparse.Namespace) -> None:
 
         ds = collect_dataset(n_demo, 0, progress=not args.no_progress)
         ds.save(path)
-    policy, batches = make_act_policy(ds, features="pusht_state", batch_size=16, seed=args.seed, chunk_size=20)
+    policy, batches, recipe = make_policy("act", ds, features="pusht_state", recipe="cpu", seed=args.seed, chunk_size=20)
     out = Path(args.ckpt_dir) / "act_pusht"
-    summary = _train(policy, batches, act_train_config(minutes=args.minutes, num_threads=args.threads,
-                                                       progress=not args.no_progress), out, ds.meta)
+    summary = _train(policy, batches, TrainConfig(**recipe, minutes=args.minutes, num_threads=args.threads,
+                                                  progress=not args.no_progress), out, ds.meta)
     out, shipped = _maybe_ship(out, "act_pusht", args)
     policy = load_checkpoint(out, device="cpu")
     n = 3 if args.quick else args.episodes
@@ -278,7 +277,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--repeats", type=int, default=15, help="latency repeats (default 15)")
     parser.add_argument("--latency-threads", type=int, default=None, help="torch threads for the latency section (default: torch's)")
     parser.add_argument("--seed", type=int, default=0, help="training seed (default 0)")
-    parser.add_argument("--checkpoint", default=None, help="evaluate this ACT checkpoint instead of training (cube/insertion)")
+    parser.add_argument("--checkpoint", default=None, help="evaluate this checkpoint instead of training (cube, insertion: ACT; dp_cube: Diffusion Policy)")
     parser.add_argument("--data-dir", default="outputs/data", help="where demonstrations are cached")
     parser.add_argument("--ckpt-dir", default="outputs/checkpoints", help="where trained checkpoints are written")
     parser.add_argument("--ship", action="store_true",
@@ -292,6 +291,8 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     if args.quick and args.ship:
         parser.error("--ship with --quick would ship a smoke-run model over coursekit/checkpoints/; drop one of them")
+    if args.ship and args.checkpoint:
+        parser.error("--ship copies a freshly trained model; with --checkpoint nothing is trained: drop one of them")
     if args.quick:
         args.minutes = min(args.minutes, 0.5)
         args.repeats = min(args.repeats, 3)

@@ -51,19 +51,18 @@ from pathlib import Path
 import torch
 
 from benchmarks.results import record
-from coursekit.checkpoint import copy_checkpoint_half, load_checkpoint, read_checkpoint_info
+from coursekit.checkpoint import SHIPPED_DIR, CheckpointSaver, copy_checkpoint_half, load_checkpoint, read_checkpoint_info
 from coursekit.data.episodes import EpisodeDataset
 from coursekit.evaluate import evaluate_pusht
 from coursekit.experts.pusht_planner import noise_tag, parse_action_noise
 from coursekit.nn.unet1d import UNet1DConfig
-from coursekit.policies.factory import make_pusht_policy
+from coursekit.policies import make_policy
 from coursekit.train import TrainConfig, train
 
 COMMAND = ".venv/bin/python -m benchmarks.bench_diffusion_policy"
 SECTION = "Diffusion Policy"
 ROOT = Path(__file__).resolve().parent.parent
-SHIP = {"diffusion": ROOT / "coursekit" / "checkpoints" / "pusht_diffusion_state",
-        "regression": ROOT / "coursekit" / "checkpoints" / "pusht_regression_state"}
+SHIP = {"diffusion": SHIPPED_DIR / "pusht_diffusion_state", "regression": SHIPPED_DIR / "pusht_regression_state"}
 
 
 def load_or_collect(path: Path, n_episodes: int, seed: int, action_noise: tuple[float, ...] = (0.0,)) -> EpisodeDataset:
@@ -80,7 +79,7 @@ def load_or_collect(path: Path, n_episodes: int, seed: int, action_noise: tuple[
 def throughput(dataset: EpisodeDataset, threads: int, seconds: float, batch_size: int,
                features: str = "pusht_state") -> float:
     """Samples/s of full trainer steps (CPU-default U-Net) after 5 warm-up steps."""
-    policy, batches = make_pusht_policy("diffusion", dataset, features=features, device="cpu", batch_size=batch_size)
+    policy, batches, _ = make_policy("diffusion", dataset, features=features, device="cpu", batch_size=batch_size)
     train(policy, batches, TrainConfig(max_steps=5, num_threads=threads, progress=False, batch_size=batch_size))
     result = train(policy, batches, TrainConfig(minutes=seconds / 60, num_threads=threads, progress=False,
                                                 checkpoint_every_minutes=None, batch_size=batch_size))
@@ -104,8 +103,8 @@ def train_policy(kind: str, dataset: EpisodeDataset, args: argparse.Namespace, o
     if args.reuse and (out / "config.json").is_file():
         return read_checkpoint_info(out)["training"]
     unet = UNet1DConfig(down_dims=tuple(int(v) for v in args.down_dims.split(",")))
-    policy, batches = make_pusht_policy(kind, dataset, features=args.features, seed=args.seed, device="cpu",
-                                        batch_size=args.batch_size, unet=unet)
+    policy, batches, _ = make_policy(kind, dataset, features=args.features, seed=args.seed, device="cpu",
+                                     batch_size=args.batch_size, unet=unet)
     meta = {**dataset.meta, "n_steps": dataset.n_steps}
     meta.pop("route_choices", None)  # bulky; the dataset file keeps it
     minutes = args.minutes if kind == "diffusion" or args.regression_minutes is None else args.regression_minutes
@@ -119,7 +118,7 @@ def train_policy(kind: str, dataset: EpisodeDataset, args: argparse.Namespace, o
         threads = args.regression_threads
     cfg = TrainConfig(minutes=minutes, max_steps=max_steps, num_threads=threads, seed=args.seed, lr=args.lr,
                       batch_size=args.batch_size)
-    return train(policy, batches, cfg, out_dir=out, dataset_meta=meta).summary
+    return train(policy, batches, cfg, callbacks=[CheckpointSaver(out, dataset_meta=meta)]).summary
 
 
 def evaluate_shipped(args: argparse.Namespace, rec) -> None:

@@ -6,7 +6,7 @@ Parts (``--only``; default: both):
   at each control rate (PushT 10 Hz, arm pair 50 Hz), and ms per action with the head's own executor;
   RTC's guided sampler is timed too (it adds a backward pass per step).
 - ``curves``: the score of each (head, strategy, d) on held-out seeds with
-  :func:`coursekit.evaluate_delay.evaluate_delayed`, plus the smoothness of the executed actions
+  :func:`coursekit.evaluate.delayed.evaluate_delayed`, plus the smoothness of the executed actions
   (mean jump at chunk switches, largest jerk). PushT: mean of max coverage with a bootstrap 95 %
   interval; transfer cube: strict success with a Wilson interval.
 
@@ -69,7 +69,7 @@ def load_head(name: str):
 
 
 def part_latency(args: argparse.Namespace) -> None:
-    from coursekit.evaluate_delay import _spec, chunk_latency_ms, latency_delay
+    from coursekit.evaluate.delayed import chunk_latency_ms, latency_delay
 
     for name in args.heads:
         policy = load_head(name)
@@ -78,8 +78,8 @@ def part_latency(args: argparse.Namespace) -> None:
             continue
         _, task, sampling, label = HEADS[name]
         ms = chunk_latency_ms(policy, task, sampling=sampling, repeats=args.repeats)
-        spec = _spec(policy)
-        per_action = ms / (1 if getattr(spec, "temporal_ensembling", policy.policy_type == "act") else spec.n_action_steps)
+        spec = policy.execution_spec()
+        per_action = ms / (1 if spec.temporal_ensembling else spec.n_action_steps)
         d10, d50 = latency_delay(ms, "pusht"), latency_delay(ms, "transfer_cube")
         note = (f"batch 1, median of {args.repeats} after a warm-up, torch threads {_threads()}, 1-min load "
                 f"average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; d = ceil(latency x rate): "
@@ -108,7 +108,7 @@ def _block_file(cache: Path, name: str, strategy: str, d: int, start: int, n: in
 
 
 def run_block(policy, name: str, strategy: str, d: int, seeds: list[int], args: argparse.Namespace) -> dict:
-    from coursekit.evaluate_delay import evaluate_delayed, smoothness
+    from coursekit.evaluate.delayed import evaluate_delayed, smoothness
 
     _, task, sampling, _ = HEADS[name]
     r = evaluate_delayed(policy, task, strategy, d, seeds, seed=args.seed, sampling=sampling, record=True,

@@ -13,7 +13,7 @@ import platform
 import time
 from pathlib import Path
 
-from coursekit.io import atomic_write_text
+from coursekit.atomic import atomic_write_text
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results.json"

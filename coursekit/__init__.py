@@ -15,46 +15,31 @@ Glossary (paper symbol -> name in code, notebooks and docs alike; see ``courseki
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from coursekit.lazy import lazy_loader
 
 __version__ = "0.1.0"
 
-# Names resolved on first access: "attribute" -> "module[:object]".
+# Names resolved on first access: "attribute" -> "module:" (the module) or "module:object".
 _LAZY = {
-    "envs": "coursekit.envs",
-    "experts": "coursekit.experts",
-    "data": "coursekit.data",
-    "diffusion": "coursekit.diffusion",
-    "nn": "coursekit.nn",
-    "policies": "coursekit.policies",
-    "execution": "coursekit.execution",
-    "viz": "coursekit.viz",
-    "grading": "coursekit.grading",
-    "glossary": "coursekit.glossary",
-    "config": "coursekit.config",
-    "checkpoint": "coursekit.checkpoint",
-    "train": "coursekit.train",
-    "evaluate": "coursekit.evaluate",
+    "envs": "coursekit.envs:",
+    "experts": "coursekit.experts:",
+    "data": "coursekit.data:",
+    "diffusion": "coursekit.diffusion:",
+    "nn": "coursekit.nn:",
+    "policies": "coursekit.policies:",
+    "execution": "coursekit.execution:",
+    "viz": "coursekit.viz:",
+    "grading": "coursekit.grading:",
+    "glossary": "coursekit.glossary:",
+    "config": "coursekit.config:",
+    "checkpoint": "coursekit.checkpoint:",
+    "train": "coursekit.train:",
+    "evaluate": "coursekit.evaluate:",
     "check": "coursekit.grading.check:check",
 }
 
 __all__ = sorted(_LAZY) + ["__version__"]
-
-
-def __getattr__(name: str) -> Any:
-    target = _LAZY.get(name)
-    if target is None:
-        raise AttributeError(f"module 'coursekit' has no attribute {name!r}")
-    module_name, _, obj = target.partition(":")
-    module = importlib.import_module(module_name)
-    value = getattr(module, obj) if obj else module
-    globals()[name] = value  # cache: later lookups skip __getattr__
-    return value
-
-
-def __dir__() -> list[str]:
-    return __all__
+__getattr__, __dir__ = lazy_loader(__name__, _LAZY)
 
 
 def _register_gym_envs() -> None:

@@ -14,6 +14,7 @@ Layout::
 
 Writing is atomic at the directory level: both files go into a hidden temporary directory beside
 CKPT, which then replaces CKPT with renames, so a reader sees the old checkpoint or the new one.
+Other files in CKPT (a training run's metrics.csv and loss.png) are carried over, never deleted.
 Loading rebuilds the policy from its registered class and config (``coursekit.policies``), checks
 the weights' SHA-256 against config.json, then every tensor name and shape against the freshly
 built policy, and refuses anything else with a :class:`CheckpointError` (a ValueError) that says
@@ -95,6 +96,7 @@ def save_checkpoint(policy: Any, path: str | os.PathLike, *, dataset_meta: dict[
                 os.fsync(fh.fileno())
             os.chmod(f, 0o666 & ~umask)  # ordinary file modes, not mkdtemp's private 0600/0700
         os.chmod(tmp, 0o777 & ~umask)
+        _keep_foreign_files(path, tmp)
         # Swap directories: old -> aside, new -> path, then delete the old one.
         old = None
         if path.exists():
@@ -107,6 +109,28 @@ def save_checkpoint(policy: Any, path: str | os.PathLike, *, dataset_meta: dict[
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)
     return path
+
+
+def _keep_foreign_files(path: Path, tmp: Path) -> None:
+    """Carry every entry of ``path`` that is not the checkpoint's own (a run's metrics.csv, loss.png, ...)
+    into the new directory ``tmp`` before the swap, so re-saving a checkpoint deletes nothing else.
+
+    Files are hard-linked (the same inode: a writer holding one open keeps writing into the new
+    directory), or copied where the filesystem has no hard links; folders are copied. Nothing is
+    moved, so a failed save leaves CKPT exactly as it was.
+    """
+    if not path.is_dir():
+        return
+    for entry in path.iterdir():
+        if entry.name in (WEIGHTS_FILE, CONFIG_FILE):
+            continue
+        if entry.is_dir() and not entry.is_symlink():
+            shutil.copytree(entry, tmp / entry.name, symlinks=True)
+            continue
+        try:
+            os.link(entry, tmp / entry.name, follow_symlinks=False)
+        except OSError:
+            shutil.copy2(entry, tmp / entry.name, follow_symlinks=False)
 
 
 def copy_checkpoint_half(src: str | os.PathLike, dest: str | os.PathLike) -> Path:
@@ -193,3 +217,64 @@ def load_checkpoint(path: str | os.PathLike, device: Any = "auto", expected_type
                                   f"the config builds {tuple(expected[name].shape)}")
     policy.load_state_dict(tensors, strict=True)  # copies (and casts float16 storage) into the parameters
     return policy.to(resolve_device(device)).eval()
+
+
+class CheckpointSaver:
+    """A training callback that writes the policy to ``path`` at every ``on_checkpoint`` (atomically).
+
+    ``dataset_meta`` is stored beside the trainer's summary (``training`` in config.json).
+    """
+
+    def __init__(self, path: str | os.PathLike, dataset_meta: dict[str, Any] | None = None) -> None:
+        self.path, self.dataset_meta = Path(path), dataset_meta
+
+    def on_checkpoint(self, policy: Any, summary: dict[str, Any]) -> None:
+        save_checkpoint(policy, self.path, dataset_meta=self.dataset_meta, training=dict(summary))
+
+
+def warm_start(policy: Any, path: str | os.PathLike) -> dict[str, Any]:
+    """Copy the weights of the checkpoint ``path`` into ``policy``; returns that checkpoint's provenance.
+
+    The checkpoint must hold the same policy type with the same config and the same normalisers
+    (i.e. it was trained on the same kind of data): anything else is refused with the difference.
+    Only weights carry over; the optimiser state does not (checkpoints do not store it), so the
+    continued run starts a fresh warm-up + schedule. Pass the result to ``train(init_from=...)``.
+    """
+    from coursekit.config import config_to_dict
+    from coursekit.policies.base import normalizers_to_json
+
+    source = load_checkpoint(path, device=policy.device, expected_type=policy.policy_type)
+    mine, theirs = config_to_dict(policy.config), config_to_dict(source.config)
+    diff = {k: (theirs.get(k), mine.get(k)) for k in sorted(set(mine) | set(theirs)) if mine.get(k) != theirs.get(k)}
+    if diff:
+        raise CheckpointError(f"--init-from {str(path)!r}: its config differs from this run's as (checkpoint, run): {diff}")
+    if normalizers_to_json(source.normalizers) != normalizers_to_json(policy.normalizers):
+        raise CheckpointError(f"--init-from {str(path)!r}: its normalisers differ from those fitted on {policy.policy_type} "
+                              f"training data here; warm-start only on the same demonstrations")
+    policy.load_state_dict(source.state_dict())
+    training = read_checkpoint_info(path).get("training") or {}
+    keys = ("steps", "seconds", "samples_per_s", "torch_threads", "init_from")
+    return {"path": str(path), **{k: training.get(k) for k in keys}}
+
+
+SHIPPED_DIR = Path(__file__).resolve().parent / "checkpoints"
+"""The checkpoints shipped with the package (float16 weights; see the README's results table)."""
+
+
+def shipped_checkpoints() -> list[str]:
+    """Names of the checkpoints shipped in ``coursekit/checkpoints/``."""
+    return sorted(p.name for p in SHIPPED_DIR.iterdir() if (p / CONFIG_FILE).is_file()) if SHIPPED_DIR.is_dir() else []
+
+
+def find_checkpoint(*names: str, also_in: tuple[str | os.PathLike, ...] = ()) -> Path | None:
+    """The first checkpoint called one of ``names`` among the shipped ones, then in the folders ``also_in``.
+
+    E.g. ``find_checkpoint("act_transfer_cube", also_in=("outputs/checkpoints",))``: the shipped
+    checkpoint if there is one, else one trained by a benchmark; None when there is none (a
+    notebook then trains a stand-in).
+    """
+    for folder in (SHIPPED_DIR, *map(Path, also_in)):
+        for name in names:
+            if (folder / name / CONFIG_FILE).is_file():
+                return folder / name
+    return None

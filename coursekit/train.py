@@ -1,11 +1,15 @@
 """The trainer, shared by every chunk policy: AdamW, warm-up + cosine LR, EMA weights, a time budget.
 
-It knows nothing about diffusion: it draws batches from an iterable, calls
-``policy.compute_loss(batch)["loss"]``, steps the optimiser, updates the EMA copy and writes
-checkpoints. Defaults follow Diffusion Policy's training recipe (Chi et al. 2023, App. A and the
+It knows nothing about diffusion and writes no file: it draws batches from an iterable, calls
+``policy.compute_loss(batch)["loss"]``, steps the optimiser and updates the EMA copy; whoever
+wants a record passes callbacks (:class:`TrainCallback`): ``on_log(record)`` every
+``log_every`` steps (a metrics table, a live loss curve) and ``on_checkpoint(policy, summary)``
+every ``checkpoint_every_minutes`` and at the end (``coursekit.checkpoint.CheckpointSaver``
+writes the checkpoint). Defaults follow Diffusion Policy's training recipe (Chi et al. 2023, App. A and the
 reference config): AdamW(lr 1e-4, betas (0.95, 0.999), weight decay 1e-6), 500 warm-up steps
 then cosine decay stepped per batch, batch 256, EMA with decay ``1 - (1 + step)^-0.75`` capped
-at 0.9999. ACT uses the same trainer with its own settings (constant LR, no EMA, ...).
+at 0.9999. Each policy class names its recipes (``recipes``: "paper", "cpu"); ACT's differ
+(constant LR, no EMA, ...).
 
 A run ends at ``max_steps`` or after ``minutes`` of wall-clock time, whichever comes first. With
 only a time budget the cosine schedule runs on elapsed time (the fraction of the budget used),
@@ -18,10 +22,9 @@ from __future__ import annotations
 import copy
 import math
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import torch
 from tqdm.auto import tqdm
@@ -64,25 +67,26 @@ class TrainConfig:
     num_threads: int | None = None
     """torch.set_num_threads for the run (restored afterwards); None leaves it alone."""
     checkpoint_every_minutes: float | None = 5.0
-    """Write the (EMA) policy to out_dir this often (None: only at the end)."""
+    """Hand the (EMA) policy to the callbacks' on_checkpoint this often (None: only at the end)."""
     log_every: int = 50
-    """Record mean loss / LR / throughput in the history every this many steps."""
+    """Record mean loss / LR / throughput (history and on_log) every this many steps."""
     progress: bool = True
     """Show a tqdm progress bar."""
 
     @classmethod
-    def recipe(cls, name: str, **overrides: Any) -> TrainConfig:
-        """A named recipe: "paper" (the defaults above: lr 1e-4, batch 256) or "cpu".
+    def recipe(cls, name: str, policy_type: str = "diffusion", **overrides: Any) -> TrainConfig:
+        """The named recipe of a policy type ("paper" or "cpu"; see each class's ``recipes``).
 
-        "cpu" (lr 5e-4, batch 128) is a deliberate departure for a ~20-minute CPU budget, where the
-        paper's recipe (tuned for hours of training) has barely left its warm-up: in 4.5-minute
-        runs on one core the held-out epsilon loss was 0.072 (cpu) vs 0.164 (paper) for the
-        64/128/256 U-Net, and 0.065 vs 0.132 for 32/64/128 (batch 128 gives twice the optimiser
-        steps at about the same samples/s). ``overrides`` set any other field.
+        Diffusion Policy's "paper" is the defaults above (lr 1e-4, batch 256); its "cpu" (lr 5e-4,
+        batch 128) is a measured departure for a ~20-minute CPU budget (reasons and numbers beside
+        ``UNetChunkPolicy.recipes``); ACT's are beside ``ACTPolicy.recipes``. ``overrides`` set any
+        other field (a budget: ``minutes=`` and/or ``max_steps=``).
         """
-        recipes = {"paper": {}, "cpu": {"lr": 5e-4, "batch_size": 128}}
+        from coursekit.policies import get_policy_class
+
+        recipes = get_policy_class(policy_type).recipes
         if name not in recipes:
-            raise ValueError(f"unknown training recipe {name!r}; expected one of {sorted(recipes)}")
+            raise ValueError(f"unknown training recipe {name!r} for {policy_type!r}; expected one of {sorted(recipes)}")
         return cls(**{**recipes[name], **overrides})
 
     def __post_init__(self) -> None:
@@ -181,25 +185,41 @@ def make_optimizer(policy: torch.nn.Module, config: TrainConfig) -> torch.optim.
         return torch.optim.AdamW(groups, foreach=True, **kwargs)
 
 
-def train(policy: Any, batches: Iterable[dict[str, Any]], config: TrainConfig, out_dir: str | Path | None = None,
-          dataset_meta: dict[str, Any] | None = None,
-          callback: Callable[[int, dict[str, float]], None] | None = None,
-          init_from: dict[str, Any] | None = None) -> TrainResult:
+class TrainCallback(Protocol):
+    """What a training callback may define (each method is optional; duck-typed).
+
+    ``on_log(record)``: every ``log_every`` steps (and at the last step) with a record holding
+    exactly ``step``, ``loss`` (mean since the last record), ``lr``, ``samples_per_s``, ``wall_s``.
+    ``on_checkpoint(policy, summary)``: every ``checkpoint_every_minutes`` with the (EMA) policy
+    and ``summary["complete"] = False``, and once at the end with the final policy and the full
+    summary (``complete = True``). A callback must not change the policy.
+    """
+
+    def on_log(self, record: Mapping[str, float]) -> None: ...
+
+    def on_checkpoint(self, policy: Any, summary: Mapping[str, Any]) -> None: ...
+
+
+def _notify(callbacks: Sequence[Any], method: str, *args: Any) -> None:
+    for cb in callbacks:
+        fn = getattr(cb, method, None)
+        if fn is not None:
+            fn(*args)
+
+
+def train(policy: Any, batches: Iterable[dict[str, Any]], config: TrainConfig, *,
+          callbacks: Sequence[TrainCallback] = (), init_from: dict[str, Any] | None = None) -> TrainResult:
     """Train ``policy`` in place on ``batches`` (an endless iterable of batch dicts) under ``config``.
 
     Args:
         policy: a ChunkPolicy with fitted normalisers (``compute_loss(batch)["loss"]``).
-        batches: e.g. a :class:`coursekit.data.batches.WindowBatcher` (seeded on its own).
+        batches: e.g. the batcher from :func:`coursekit.policies.make_policy` (seeded on its own).
         config: the :class:`TrainConfig`.
-        out_dir: if given, the (EMA) policy is checkpointed there periodically and at the end.
-        dataset_meta: stored in the checkpoint beside the training summary.
-        callback: called as ``callback(step, logged_row)`` at every history row.
+        callbacks: :class:`TrainCallback` objects (e.g. ``CheckpointSaver(out_dir)``, ``MetricsLog(run_dir)``).
         init_from: provenance of the weights ``policy`` starts from when this run continues an
-            earlier one (a warm start); stored as ``summary["init_from"]`` so a checkpoint states
-            its whole training, not only the last segment.
+            earlier one (``coursekit.checkpoint.warm_start``); stored as ``summary["init_from"]``
+            so a checkpoint states its whole training, not only the last segment.
     """
-    from coursekit.checkpoint import save_checkpoint
-
     threads_before = torch.get_num_threads()
     if config.num_threads is not None:
         torch.set_num_threads(config.num_threads)
@@ -275,13 +295,13 @@ def train(policy: Any, batches: Iterable[dict[str, Any]], config: TrainConfig, o
                 history.append(row)
                 sums, n_logged, last_log_t = {}, 0, now
                 bar.set_postfix(loss=f"{row['loss']:.4f}", lr=f"{row['lr']:.1e}", sps=f"{row['samples_per_s']:.0f}")
-                if callback is not None:
-                    callback(step, row)
+                _notify(callbacks, "on_log", {"step": step, "loss": row["loss"], "lr": row["lr"],
+                                              "samples_per_s": row["samples_per_s"], "wall_s": row["seconds"]})
             bar.update(1 if config.max_steps is not None else int(now - start) - bar.n)
-            if (out_dir is not None and config.checkpoint_every_minutes is not None
+            if (callbacks and config.checkpoint_every_minutes is not None
                     and now - last_ckpt >= 60.0 * config.checkpoint_every_minutes):
-                save_checkpoint(ema.model if ema else policy, out_dir, dataset_meta=dataset_meta,
-                                training={**summary(now - start), "complete": False})
+                _notify(callbacks, "on_checkpoint", ema.model if ema else policy,
+                        {**summary(now - start), "complete": False})
                 last_ckpt = time.perf_counter()
     finally:
         bar.close()
@@ -293,6 +313,5 @@ def train(policy: Any, batches: Iterable[dict[str, Any]], config: TrainConfig, o
     final.eval()
     result = TrainResult(policy=final, raw_policy=policy, history=history,
                          summary={**summary(seconds), "complete": True})
-    if out_dir is not None:
-        save_checkpoint(final, out_dir, dataset_meta=dataset_meta, training=result.summary)
+    _notify(callbacks, "on_checkpoint", final, result.summary)
     return result

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from coursekit.execution.spec import check_horizons
 from coursekit.data.chunks import _check_ends
 
 
@@ -43,13 +44,6 @@ def sequence_window_indices(episode_ends: np.ndarray, horizon: int, n_obs_steps:
         episode: (W,) int64 episode of each window.
     """
     ends = _check_ends(episode_ends)
-    for name, v in (("horizon", horizon), ("n_obs_steps", n_obs_steps), ("n_action_steps", n_action_steps)):
-        if not isinstance(v, (int, np.integer)) or v < 1:
-            raise ValueError(f"{name} must be a positive integer, got {v!r}")
-    if n_obs_steps - 1 + n_action_steps > horizon:
-        raise ValueError(
-            f"To - 1 + Ta must fit in Tp: n_obs_steps={n_obs_steps}, n_action_steps={n_action_steps}, "
-            f"horizon={horizon}"
-        )
+    check_horizons(n_obs_steps, horizon, n_action_steps)
     raise NotImplementedError('Exercise 1.1 (chunk_windows): implement sequence_window_indices; see its docstring')
     return indices, episode

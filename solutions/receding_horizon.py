@@ -46,6 +46,11 @@ class RecedingHorizon:
         self.plan_index = 0  # how many actions of ``plan`` have been executed
         self.n_calls = 0  # chunk predictions made since reset (for latency accounting)
 
+    @classmethod
+    def from_spec(cls, predict_chunk: Callable[[Any], Any], spec: Any) -> RecedingHorizon:
+        """The executor every policy builds: To and Ta from an :class:`~coursekit.execution.spec.ExecutionSpec`."""
+        return cls(predict_chunk, n_obs_steps=int(spec.n_obs_steps), n_action_steps=int(spec.n_action_steps))
+
     def _predict(self) -> Any:
         """Call the predictor on the current history and check the chunk's shape."""
         obs_history = stack_history(self.history)  # (B, To, ...)

@@ -51,6 +51,11 @@ class TemporalEnsemble:
         self._chunks: list[tuple[int, np.ndarray]] = []  # (step made at, (B, Tp - start, Da))
         self.t = 0
 
+    @classmethod
+    def from_spec(cls, predict_chunk: Callable[[Any], Any], spec: Any) -> TemporalEnsemble:
+        """The executor every policy builds: To and m from an :class:`~coursekit.execution.spec.ExecutionSpec`."""
+        return cls(predict_chunk, n_obs_steps=int(spec.n_obs_steps), ensemble_decay=float(spec.ensemble_decay))
+
     def reset(self, obs: Any) -> None:
         """Start an episode: history = To copies of ``obs`` (B, Do); forget every chunk."""
         obs = _to_numpy(obs)

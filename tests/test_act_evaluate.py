@@ -1,4 +1,4 @@
-"""ACT plumbing end to end: factory + train recipe, and evaluate_aloha on a few steps of the arm pair."""
+"""ACT plumbing end to end: make_policy + train recipe, and evaluate_aloha on a few steps of the arm pair."""
 
 from __future__ import annotations
 
@@ -9,9 +9,11 @@ torch = pytest.importorskip("torch")
 pytest.importorskip("mujoco")
 
 from coursekit.data import EpisodeDataset  # noqa: E402
-from coursekit.evaluate_aloha import STATE_COLUMNS, evaluate_aloha  # noqa: E402
+from coursekit.data.features import default_features  # noqa: E402
+from coursekit.evaluate.aloha import STATE_COLUMNS, evaluate_aloha  # noqa: E402
 from coursekit.execution.receding import RecedingHorizon  # noqa: E402
-from coursekit.policies.act_factory import act_train_config, default_features, make_act_policy  # noqa: E402
+from coursekit.policies.factory import make_policy  # noqa: E402
+from coursekit.train import TrainConfig  # noqa: E402
 
 
 def _tiny_aloha_policy():
@@ -19,8 +21,9 @@ def _tiny_aloha_policy():
     eps = [{"qpos": rng.normal(size=(30, 14)), "env_state": rng.normal(size=(30, 7)),
             "action": rng.normal(size=(30, 14)) * 0.1} for _ in range(2)]
     ds = EpisodeDataset.from_episodes(eps, {"seed": 0, "n_episodes": 2})
-    assert default_features(ds) == "aloha_state"
-    policy, batches = make_act_policy(ds, chunk_size=8, hidden_dim=16, ff_dim=32, n_heads=2, batch_size=4)
+    assert default_features(ds.arrays) == "aloha_state"
+    policy, batches, recipe = make_policy("act", ds, chunk_size=8, hidden_dim=16, ff_dim=32, n_heads=2, batch_size=4)
+    assert recipe["batch_size"] == 4 and recipe["lr"] == 1e-5  # the paper recipe, batch size overridden
     return policy, batches, ds
 
 
@@ -28,12 +31,12 @@ def test_factory_and_recipes():
     policy, batches, ds = _tiny_aloha_policy()
     assert (policy.config.obs_dim, policy.config.action_dim, policy.config.features) == (21, 14, "aloha_state")
     assert set(policy.normalizers) == {"obs", "action"} and len(batches) == ds.n_steps
-    paper = act_train_config("paper", max_steps=1)
+    paper = TrainConfig.recipe("paper", "act", max_steps=1)
     assert (paper.lr, paper.weight_decay, paper.batch_size, paper.lr_schedule, paper.ema) == (1e-5, 1e-4, 8, "constant", False)
-    cpu = act_train_config("cpu", max_steps=1)
+    cpu = TrainConfig.recipe("cpu", "act", max_steps=1)
     assert (cpu.lr, cpu.batch_size, cpu.lr_schedule, cpu.warmup_steps) == (3e-4, 16, "cosine", 200)
-    with pytest.raises(ValueError, match="preset"):
-        act_train_config("gpu", max_steps=1)
+    with pytest.raises(ValueError, match="unknown training recipe 'gpu'"):
+        TrainConfig.recipe("gpu", "act", max_steps=1)
 
 
 def test_evaluate_aloha_reports_stages_and_records_states():

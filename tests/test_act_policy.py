@@ -8,7 +8,8 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from coursekit.data import EpisodeDataset  # noqa: E402
-from coursekit.data.act_batches import ChunkBatcher, act_training_arrays, env_obs_features  # noqa: E402
+from coursekit.data.batches import ChunkBatcher  # noqa: E402
+from coursekit.data.features import env_obs_features, training_arrays  # noqa: E402
 from coursekit.execution.ensembling import TemporalEnsemble  # noqa: E402
 from coursekit.execution.receding import RecedingHorizon  # noqa: E402
 from coursekit.nn.vision import VisionEncoderConfig  # noqa: E402
@@ -163,7 +164,7 @@ def test_batcher_pads_and_training_reduces_the_loss():
     eps = [{"qpos": rng.normal(size=(L, 14)), "env_state": rng.normal(size=(L, 7)),
             "action": np.cumsum(rng.normal(size=(L, 14)), axis=0)} for L in (9, 12)]
     ds = EpisodeDataset.from_episodes(eps)
-    obs, action = act_training_arrays(ds, "aloha_state")
+    obs, action = training_arrays(ds, "aloha_state")
     assert obs["obs"].shape == (21, 21)
     batcher = ChunkBatcher(obs, action, ds.episode_ends, chunk_size=K, batch_size=8, seed=0)
     b = batcher.batch(torch.tensor([8, 9]))  # last step of episode 0, first of episode 1

@@ -164,3 +164,29 @@ def test_copy_checkpoint_half_keeps_provenance(saved, tmp_path):
     assert (info["dataset"], info["training"], info["config"]) == (src_info["dataset"], src_info["training"], src_info["config"])
     for (name, a), b in zip(policy.state_dict().items(), load_checkpoint(dest, device="cpu").state_dict().values()):
         torch.testing.assert_close(b, a.half().float(), msg=name)
+
+
+def test_resaving_keeps_the_run_folders_other_files(saved):
+    """A training run re-saves its checkpoint into a folder that also holds metrics.csv: nothing else is lost,
+    and a writer holding the CSV open keeps writing into the new folder (the file is carried over, not copied)."""
+    policy, path = saved
+    (path / "notes.txt").write_text("mine")
+    with open(path / "metrics.csv", "w") as fh:
+        fh.write("step\n1\n")
+        fh.flush()
+        save_checkpoint(policy, path, training={"steps": 8})
+        fh.write("2\n")
+    assert (path / "notes.txt").read_text() == "mine"
+    assert (path / "metrics.csv").read_text() == "step\n1\n2\n"
+    assert read_checkpoint_info(path)["training"]["steps"] == 8
+    assert sorted(p.name for p in path.parent.iterdir()) == ["ckpt"]  # no temporary folder left behind
+
+
+def test_find_checkpoint_looks_in_the_shipped_folder_then_elsewhere(saved, tmp_path):
+    from coursekit.checkpoint import SHIPPED_DIR, find_checkpoint, shipped_checkpoints
+
+    _, path = saved
+    assert find_checkpoint("pusht_diffusion_state") == SHIPPED_DIR / "pusht_diffusion_state"
+    assert "act_transfer_cube" in shipped_checkpoints()
+    assert find_checkpoint("no_such_checkpoint") is None
+    assert find_checkpoint("no_such_checkpoint", "ckpt", also_in=(path.parent,)) == path

@@ -31,8 +31,36 @@ def test_train_act_then_eval_on_its_task(cube_demos, tmp_path):
     assert set(summary["stage_rates"]) == {"1", "2", "3", "4"} and 0.0 <= summary["strict_success_rate"] <= 1.0
 
 
-def test_act_options_are_refused_for_diffusion_features(cube_demos, tmp_path, capsys):
-    assert main(["train", "--policy", "diffusion", "--features", "aloha_state", "--data", str(cube_demos),
+def test_options_a_policy_lacks_are_refused_before_any_work(cube_demos, tmp_path, capsys):
+    assert main(["train", "--policy", "diffusion", "--chunk-size", "10", "--data", str(cube_demos),
                  "--steps", "1", "--out", str(tmp_path / "x")]) == 2
-    assert "--features aloha_state is for --policy act" in capsys.readouterr().err
+    assert "--chunk-size do(es) not apply to --policy diffusion" in capsys.readouterr().err
     assert not (tmp_path / "x").exists()
+    assert main(["train", "--policy", "act", "--down-dims", "16,32", "--data", str(cube_demos),
+                 "--steps", "1", "--out", str(tmp_path / "y")]) == 2
+    assert "--unet do(es) not apply to --policy act" in capsys.readouterr().err
+    assert not (tmp_path / "y").exists()
+
+
+def test_train_refuses_an_output_folder_it_did_not_write(cube_demos, tmp_path, capsys):
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "notes.txt").write_text("keep me")
+    assert main(["train", "--policy", "act", "--data", str(cube_demos), "--steps", "1", "--out", str(out)]) == 2
+    assert "not a coursekit run" in capsys.readouterr().err
+    assert (out / "notes.txt").read_text() == "keep me" and sorted(p.name for p in out.iterdir()) == ["notes.txt"]
+
+
+def test_eval_overrides_are_validated_and_policy_specific(cube_demos, tmp_path, capsys):
+    ckpt = tmp_path / "act"
+    assert main(["train", "--policy", "act", "--data", str(cube_demos), "--steps", "1", "--chunk-size", "10",
+                 "--out", str(ckpt), "--threads", "1", "--no-progress"]) == 0
+    common = ["eval", str(ckpt), "--episodes", "1", "--max-steps", "2", "--no-progress"]
+    assert main([*common, "--ensemble-decay", "-1"]) == 2
+    assert "ensemble_decay must be a finite number >= 0, got -1" in capsys.readouterr().err
+    assert main([*common, "--ddim-spacing", "trailing"]) == 2
+    assert "['ddim_timestep_spacing'] are not evaluation settings of a 'act' policy" in capsys.readouterr().err
+    assert main([*common, "--sampler", "ddpm"]) == 2
+    assert "takes no sampling option(s) ['sampler']" in capsys.readouterr().err
+    # the loaded checkpoint is untouched: overrides live in a copy
+    assert json.loads((ckpt / "config.json").read_text())["config"]["ensemble_decay"] == 0.01

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import coursekit
-from coursekit.evaluate_delay import STRATEGIES, check_strategy, evaluate_delayed, latency_delay, smoothness
+from coursekit.evaluate.delayed import STRATEGIES, check_strategy, evaluate_delayed, latency_delay, smoothness
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 CKPT = Path(coursekit.__file__).parent / "checkpoints"

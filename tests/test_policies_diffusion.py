@@ -13,7 +13,7 @@ from coursekit.diffusion.loss import q_sample
 from coursekit.nn.unet1d import UNet1DConfig
 from coursekit.nn.vision import VisionEncoderConfig
 from coursekit.policies.diffusion import DiffusionPolicy, DiffusionPolicyConfig
-from coursekit.policies.factory import make_pusht_policy
+from coursekit.policies.factory import make_policy
 
 TINY = UNet1DConfig(down_dims=(16, 32), kernel_size=3, n_groups=4, diffusion_step_embed_dim=16)
 
@@ -132,7 +132,7 @@ def test_config_validation_shows_bad_value(kwargs, match):
 
 def test_factory_fits_normalizers_and_features_to_the_data():
     ds = synthetic_pusht()
-    policy, batches = make_pusht_policy("diffusion", ds, batch_size=8, unet=TINY)
+    policy, batches, _ = make_policy("diffusion", ds, batch_size=8, unet=TINY)
     feats = pusht_state_features(ds["state"])
     assert policy.config.obs_dim == 6 and policy.config.action_dim == 2
     np.testing.assert_allclose(policy.normalizers["obs"].low, feats.min(0))
@@ -174,7 +174,7 @@ def test_image_policy_end_to_end_smoke():
     vision = VisionEncoderConfig(image_size=(32, 32), crop_size=(28, 28), widths=(16, 16, 16, 16),
                                  blocks_per_stage=1, num_keypoints=8, feature_dim=16)
     ds = synthetic_pusht(n_episodes=2, length=20)
-    policy, batches = make_pusht_policy("diffusion", ds, features="pusht_image", batch_size=4, unet=TINY,
+    policy, batches, _ = make_policy("diffusion", ds, features="pusht_image", batch_size=4, unet=TINY,
                                         vision=vision, num_inference_steps=2)
     batch = next(iter(batches))
     assert batch["image"].shape == (4, 2, 3, 32, 32) and batch["image"].dtype == torch.uint8
@@ -182,3 +182,20 @@ def test_image_policy_end_to_end_smoke():
     result = train(policy, batches, TrainConfig(max_steps=2, warmup_steps=1, progress=False))
     r = evaluate_pusht(result.policy, n_episodes=2, max_steps=3, progress=False)
     assert r.chunk_calls == 1 and 0.0 <= r.score <= 1.0
+
+
+def test_evaluation_overrides_are_validated_copies():
+    policy = tiny_policy()
+    copy = policy.with_config(ddim_timestep_spacing="trailing", n_action_steps=4)
+    assert copy.config.ddim_timestep_spacing == "trailing" and copy.execution_spec().n_action_steps == 4
+    assert policy.config.ddim_timestep_spacing == "leading" and policy.config.n_action_steps == 8  # untouched
+    assert copy.unet is policy.unet  # the same weights, not a second model
+    with pytest.raises(ValueError, match="To - 1 \\+ Ta must fit in Tp"):
+        policy.with_config(n_action_steps=16)  # validated by the config's __post_init__
+    with pytest.raises(ValueError, match="not evaluation settings"):
+        policy.with_config(horizon=32)  # would not fit the weights
+    with pytest.raises(ValueError, match="ddim_timestep_spacing"):
+        policy.with_config(ddim_timestep_spacing="middle")
+    assert policy.describe_sampling(sampler="ddpm")["num_inference_steps"] == 100
+    with pytest.raises(ValueError, match="no sampling option"):
+        policy.check_sampling({"temperature": 0.5})

@@ -43,7 +43,8 @@ def test_keypoint_features_match_env_observation_and_geometry():
 
 
 def test_registry_and_bad_input():
-    assert set(FEATURES) == {"pusht_state", "pusht_keypoints"} and feature_dim("pusht_state") == 6
+    assert set(FEATURES) == {"pusht_state", "pusht_keypoints", "pusht_image", "aloha_state", "aloha_qpos"}
+    assert feature_dim("pusht_state") == 6 and feature_dim("aloha_qpos") == 14
     with pytest.raises(ValueError, match="unknown observation features"):
         get_features("pusht_pixels")
     with pytest.raises(ValueError, match="shape"):

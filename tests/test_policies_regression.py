@@ -48,11 +48,13 @@ def test_prediction_is_deterministic_and_raw():
     policy = tiny()
     obs = np.random.default_rng(1).uniform(0, 500, (3, 2, 6)).astype(np.float32)
     a = policy.predict_chunk(obs)
-    b = policy.predict_chunk(obs, generator=torch.Generator().manual_seed(5), sampler="ddim")  # ignored
+    b = policy.predict_chunk(obs, generator=torch.Generator().manual_seed(5))  # accepted, unused
     assert a.shape == (3, 16, 2) and np.array_equal(a, b)
     assert a.min() >= 0.0 and a.max() <= 500.0  # clamped to the data range
     with pytest.raises(ValueError, match="shape"):
         policy.predict_chunk(np.zeros((3, 2, 4)))
+    with pytest.raises(ValueError, match="no sampling option"):  # one contract: options are checked, not ignored
+        policy.check_sampling({"sampler": "ddim"})
 
 
 def test_learns_the_conditional_mean_of_a_bimodal_target():

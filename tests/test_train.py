@@ -12,7 +12,7 @@ import torch
 from coursekit.data import EpisodeDataset, SequenceWindows
 from coursekit.data.batches import EpochSampler, WindowBatcher
 from coursekit.nn.unet1d import UNet1DConfig
-from coursekit.policies.factory import make_pusht_policy
+from coursekit.policies.factory import make_policy
 from coursekit.train import EMA, TrainConfig, ema_decay, lr_factor, train
 
 TINY = UNet1DConfig(down_dims=(16, 32), kernel_size=3, n_groups=4, diffusion_step_embed_dim=16)
@@ -109,7 +109,7 @@ def test_training_is_deterministic_by_seed():
     ds = synthetic_pusht()
     runs = []
     for seed in (0, 0, 1):
-        policy, batches = make_pusht_policy("diffusion", ds, batch_size=16, seed=seed, unet=TINY)
+        policy, batches, _ = make_policy("diffusion", ds, batch_size=16, seed=seed, unet=TINY)
         cfg = TrainConfig(max_steps=12, warmup_steps=2, lr=1e-3, seed=seed, log_every=4, progress=False)
         runs.append(train(policy, batches, cfg))
     w = [torch.cat([p.flatten() for p in r.policy.parameters()]) for r in runs]
@@ -124,9 +124,11 @@ def test_training_is_deterministic_by_seed():
 
 def test_time_budget_stops_the_run_and_checkpoints(tmp_path):
     ds = synthetic_pusht()
-    policy, batches = make_pusht_policy("regression", ds, batch_size=8, unet=TINY)
+    from coursekit.checkpoint import CheckpointSaver
+
+    policy, batches, _ = make_policy("regression", ds, batch_size=8, unet=TINY)
     cfg = TrainConfig(minutes=0.02, warmup_steps=0, progress=False, ema=False, log_every=1)
-    result = train(policy, batches, cfg, out_dir=tmp_path / "ckpt", dataset_meta=ds.meta)
+    result = train(policy, batches, cfg, callbacks=[CheckpointSaver(tmp_path / "ckpt", dataset_meta=ds.meta)])
     assert 1 <= result.summary["steps"] and result.summary["seconds"] < 30
     lrs = [h["lr"] for h in result.history]  # cosine over the fraction of the time budget used
     assert lrs[0] == pytest.approx(1e-4) and all(b <= a for a, b in zip(lrs, lrs[1:]))
@@ -244,3 +246,25 @@ def test_cli_init_from_continues_from_the_checkpoint_weights(tmp_path, capsys):
     assert "unet" in capsys.readouterr().err and not bad.exists()
     assert main(["train", "--steps", "1", "--policy", "regression", "--init-from", str(first), "--out", str(bad), *common]) == 2
     assert "'diffusion' policy, expected 'regression'" in capsys.readouterr().err and not bad.exists()
+
+
+def test_callbacks_get_log_records_and_the_final_policy_and_train_writes_nothing(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    ds = synthetic_pusht()
+    policy, batches, _ = make_policy("regression", ds, batch_size=8, unet=TINY)
+    logged, saved = [], []
+
+    class Spy:
+        def on_log(self, record):
+            logged.append(dict(record))
+
+        def on_checkpoint(self, pol, summary):
+            saved.append((pol, dict(summary)))
+
+    cfg = TrainConfig(max_steps=5, warmup_steps=0, log_every=2, progress=False, ema=False)
+    result = train(policy, batches, cfg, callbacks=[Spy(), object()])  # a callback may define only some hooks
+    assert [r["step"] for r in logged] == [2, 4, 5]
+    assert all(set(r) == {"step", "loss", "lr", "samples_per_s", "wall_s"} for r in logged)
+    assert logged[-1]["loss"] == pytest.approx(result.history[-1]["loss"])
+    assert len(saved) == 1 and saved[0][0] is result.policy and saved[0][1]["complete"] and saved[0][1]["steps"] == 5
+    assert list(tmp_path.iterdir()) == []

@@ -55,7 +55,7 @@ def save_figure(dataset, replay: int, path: Path) -> Path:
     """The replayed demonstration's pusher path over its start, and every demonstration's coverage."""
     from matplotlib.figure import Figure
 
-    from coursekit.io import atomic_path
+    from coursekit.atomic import atomic_path
     from coursekit.viz.pusht_plots import plot_coverage, plot_trajectories
 
     episodes = [dataset.episode(i) for i in range(dataset.n_episodes)]

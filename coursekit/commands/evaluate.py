@@ -1,8 +1,12 @@
-"""``coursekit eval CKPT``: evaluate a checkpoint on held-out seeds.
+"""``coursekit eval CKPT``: evaluate a checkpoint on held-out seeds, and optionally record a replay.
 
-PushT policies by the Diffusion Policy protocol (mean-of-max score, success rate); policies on
-ALOHA features (ACT, or DP trained on the arm pair) on the task their demonstrations came from,
-with the published stage rates and the strict final-state success.
+Any policy on the task it was trained for: PushT by the Diffusion Policy protocol (mean-of-max
+score, success rate); the arm pair (ACT, or DP / regression on arm-pair features) on the task
+its demonstrations came from, with the published stage rates and the strict final-state
+success. Evaluation-time changes (--ddim-spacing, --ensemble-decay, --no-ensembling,
+--n-action-steps) make a validated copy of the loaded policy; --sampler / --steps are its
+sampling options. ``--record DIR`` writes a self-contained meshcat HTML replay of the first
+--record-episodes episodes and a PNG grid of their first/last frames with the scores.
 """
 
 from __future__ import annotations
@@ -10,6 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+from typing import Any
 
 HELP = "evaluate a policy checkpoint on held-out seeds (PushT score/success, ALOHA stages/strict success)"
 
@@ -31,16 +36,44 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--device", default="auto", help="auto, cpu, cuda, mps (default auto)")
     parser.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
     parser.add_argument("--json", type=Path, default=None, help="also write the summary to this JSON file")
+    parser.add_argument("--record", type=Path, default=None,
+                        help="write a meshcat HTML replay and a PNG grid of first/last frames to this new folder")
+    parser.add_argument("--record-episodes", type=int, default=4, help="episodes to record with --record (default 4)")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+
+
+# command-line flag -> the config field it changes, in a validated copy of the policy (with_config)
+_OVERRIDES = {"ddim_spacing": "ddim_timestep_spacing", "ensemble_decay": "ensemble_decay",
+              "n_action_steps": "n_action_steps"}
+
+
+def _overrides(args: argparse.Namespace) -> dict[str, Any]:
+    changes = {field: getattr(args, flag) for flag, field in _OVERRIDES.items() if getattr(args, flag) is not None}
+    if args.no_ensembling:
+        changes["temporal_ensembling"] = False
+    return changes
+
+
+def _check_record_dir(args: argparse.Namespace) -> None:
+    """Before any evaluation: --record must name a new (or empty) folder."""
+    if args.record is None:
+        return
+    if args.record_episodes < 1:
+        raise ValueError(f"--record-episodes must be >= 1, got {args.record_episodes}")
+    if args.record.exists() and (not args.record.is_dir() or any(args.record.iterdir())):
+        raise ValueError(f"--record {str(args.record)!r} exists and is not an empty folder; choose a new folder "
+                         "(nothing is overwritten)")
 
 
 def run(args: argparse.Namespace) -> int:
     import torch
 
     from coursekit.checkpoint import load_checkpoint, read_checkpoint_info
-    from coursekit.evaluate import EVAL_SEED_START, evaluate_pusht, heldout_seeds
-    from coursekit.execution.receding import RecedingHorizon
+    from coursekit.evaluate.closed_loop import evaluate
+    from coursekit.evaluate.result import EVAL_SEED_START, heldout_seeds
+    from coursekit.evaluate.tasks import make_adapter, task_of
 
+    _check_record_dir(args)
     if args.threads is not None:
         if args.threads < 1:
             raise ValueError(f"--threads must be >= 1, got {args.threads}")
@@ -48,51 +81,36 @@ def run(args: argparse.Namespace) -> int:
     info = read_checkpoint_info(args.checkpoint)
     policy = load_checkpoint(args.checkpoint, device=args.device)
     seeds = heldout_seeds(args.episodes, EVAL_SEED_START if args.seed_start is None else args.seed_start)
-    c = policy.config
-    if args.no_ensembling or args.ensemble_decay is not None:
-        if not hasattr(c, "temporal_ensembling"):
-            raise ValueError(f"--no-ensembling/--ensemble-decay apply to ACT checkpoints, this one is {info.get('policy_type')!r}")
-        if args.ensemble_decay is not None and not args.ensemble_decay >= 0:
-            raise ValueError(f"--ensemble-decay must be >= 0, got {args.ensemble_decay}")
-        c.temporal_ensembling = not args.no_ensembling
-        c.ensemble_decay = c.ensemble_decay if args.ensemble_decay is None else args.ensemble_decay
-    if args.ddim_spacing is not None:
-        if not hasattr(c, "ddim_timestep_spacing"):
-            raise ValueError(f"--ddim-spacing applies to diffusion checkpoints, this one is {info.get('policy_type')!r}")
-        c.ddim_timestep_spacing = args.ddim_spacing
-    if str(getattr(c, "features", "")).startswith("aloha"):
-        return _run_aloha(args, policy, info, seeds)
-    factory = None
-    if args.n_action_steps is not None:
-        if not 1 <= args.n_action_steps <= c.horizon - c.n_obs_steps + 1:
-            raise ValueError(f"--n-action-steps must be in [1, Tp - To + 1 = {c.horizon - c.n_obs_steps + 1}], got {args.n_action_steps}")
-        factory = lambda pc: RecedingHorizon(pc, c.n_obs_steps, args.n_action_steps)  # noqa: E731
-    result = evaluate_pusht(policy, seeds=seeds, max_steps=args.max_steps or 300, sampler=args.sampler,
-                            num_inference_steps=args.steps, seed=args.seed, executor_factory=factory,
-                            dataset_meta=info.get("dataset"), progress=not args.no_progress)
+    changes = _overrides(args)
+    if changes:
+        try:
+            policy = policy.with_config(**changes)
+        except ValueError as exc:
+            raise ValueError(f"{args.checkpoint} holds a {policy.policy_type!r} policy: {exc}") from None
+    sampling = {k: v for k, v in (("sampler", args.sampler), ("num_inference_steps", args.steps)) if v is not None}
+    adapter = make_adapter(task_of(policy, info.get("dataset")), policy)
+    result = evaluate(policy, adapter, seeds, max_steps=args.max_steps, sampling=sampling, seed=args.seed,
+                      dataset_meta=info.get("dataset"), progress=not args.no_progress, record=args.record is not None)
     summary = {"checkpoint": str(args.checkpoint), **result.summary()}
-    if args.n_action_steps is not None:
-        summary["n_action_steps"] = args.n_action_steps
+    if args.record is not None:
+        summary["record"] = {k: str(v) for k, v in _write_replay(args, adapter, result).items()}
     return _report(args, summary)
 
 
-def _run_aloha(args: argparse.Namespace, policy, info: dict, seeds: list[int]) -> int:
-    from coursekit.evaluate_aloha import ALOHA_TASKS, evaluate_aloha
+def _write_replay(args: argparse.Namespace, adapter: Any, result: Any) -> dict[str, Any]:
+    """The first --record-episodes episodes as EpisodeRecordings -> coursekit.viz.replay.write_replay."""
+    from coursekit.viz.replay import EpisodeRecording, write_replay
 
-    task = (info.get("dataset") or {}).get("task")
-    if task not in ALOHA_TASKS:
-        raise ValueError(f"checkpoint {str(args.checkpoint)!r} uses ALOHA features but its dataset meta names task "
-                         f"{task!r}; expected one of {sorted(ALOHA_TASKS)}")
-    result = evaluate_aloha(policy, task, seeds=seeds, max_steps=args.max_steps or 400,
-                            dataset_meta=info.get("dataset"), progress=not args.no_progress)
-    summary = {"checkpoint": str(args.checkpoint), "task": task, "episodes": len(seeds),
-               "stage_rates": result.info["stage_rates"], "strict_success_rate": result.info["strict_success_rate"],
-               "temporal_ensembling": getattr(policy.config, "temporal_ensembling", None)}
-    return _report(args, summary)
+    states = adapter.replay_states(result)  # (N, T+1, S), finished episodes padded with their last state
+    scores, success = adapter.episode_scores(result)
+    episodes = [EpisodeRecording(seed=result.seeds[i], states=states[i, : int(result.length[i]) + 1],
+                                 score=float(scores[i]), success=bool(success[i]))
+                for i in range(min(args.record_episodes, len(result.seeds)))]
+    return write_replay(args.record, adapter.task, episodes)
 
 
 def _report(args: argparse.Namespace, summary: dict) -> int:
-    from coursekit.io import atomic_write_text
+    from coursekit.atomic import atomic_write_text
 
     text = json.dumps(summary, indent=1)
     print(text)

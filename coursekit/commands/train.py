@@ -1,4 +1,8 @@
-"""``coursekit train``: train a chunk policy on PushT demonstrations and write a checkpoint.
+"""``coursekit train``: train any chunk policy on any task's demonstrations and write a run folder.
+
+The run folder (--out) holds the checkpoint (model.safetensors + config.json, rewritten every
+--checkpoint-every minutes and at the end), metrics.csv (step, loss, lr, samples/s, wall time)
+and loss.png, both written during training.
 
 Examples::
 
@@ -8,6 +12,7 @@ Examples::
     coursekit train --policy regression --data demos.npz --minutes 20 --out runs/reg     # the baseline
     coursekit collect aloha-cube --out cube.npz
     coursekit train --policy act --recipe cpu --data cube.npz --minutes 30 --out runs/act_cube  # ACT
+    coursekit train --policy diffusion --recipe cpu --data cube.npz --minutes 30 --out runs/dp_cube  # DP, arm pair
     # images (the paper's image PushT setting) -- a GPU job:
     coursekit train --policy diffusion --features pusht_image --unet paper_image --vision resnet18 \
         --device cuda --data demos.npz --steps 200000 --out runs/dp_image
@@ -19,25 +24,31 @@ import argparse
 import dataclasses
 import json
 from pathlib import Path
+from typing import Any
 
-HELP = "train a chunk policy (diffusion, regression baseline or act) on demonstrations and write a checkpoint"
+from coursekit.data.features import FEATURES  # numpy only: `coursekit --help` stays instant
+from coursekit.policies import POLICY_TYPES  # the registry itself (no torch until a class is used)
+
+HELP = "train a chunk policy (diffusion, regression baseline or act) on PushT or arm-pair demonstrations"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--policy", choices=["diffusion", "regression", "act"], default="diffusion",
+    parser.add_argument("--policy", choices=sorted(POLICY_TYPES), default="diffusion",
                         help="policy head (default: diffusion; act = ACT, the transformer CVAE)")
     parser.add_argument("--data", type=Path, required=True, help="demonstrations .npz (from `coursekit collect ...`)")
-    parser.add_argument("--out", type=Path, required=True, help="checkpoint directory to write (model.safetensors + config.json)")
+    parser.add_argument("--out", type=Path, required=True,
+                        help="run folder to create: checkpoint (model.safetensors + config.json), metrics.csv, loss.png")
     parser.add_argument("--minutes", type=float, default=None, help="wall-clock training budget in minutes")
     parser.add_argument("--steps", type=int, default=None, help="optimiser steps (default: until --minutes is used up)")
-    parser.add_argument("--features", choices=["pusht_state", "pusht_keypoints", "pusht_image", "aloha_state", "aloha_qpos"],
-                        default=None, help="observation features (default: pusht_state = agent xy, block xy, sin/cos "
-                                           "angle for diffusion/regression; read from the data for act)")
+    parser.add_argument("--features", choices=sorted(FEATURES), default=None,
+                        help="observation features (default: from the data: pusht_state = agent xy, block xy, sin/cos "
+                             "angle for PushT, aloha_state = qpos + object poses for the arm pair)")
     parser.add_argument("--chunk-size", type=int, default=None, help="k, actions per ACT chunk (default: ACTConfig's)")
-    parser.add_argument("--unet", default="cpu", help="U-Net size preset: cpu (default), paper_lowdim, paper_image")
+    parser.add_argument("--unet", default=None, help="U-Net size preset: cpu (default), paper_lowdim, paper_image")
     parser.add_argument("--down-dims", default=None, help="override the preset's U-Net channels, e.g. 32,64,128")
-    parser.add_argument("--vision", default="cpu", help="image encoder preset for --features pusht_image: cpu (default), resnet18")
-    parser.add_argument("--n-action-steps", type=int, default=8, help="Ta, actions executed per chunk (default 8)")
+    parser.add_argument("--vision", default=None, help="image encoder preset for --features pusht_image: cpu (default), resnet18")
+    parser.add_argument("--n-action-steps", type=int, default=None,
+                        help="Ta, actions executed per chunk (default: the policy's, 8 for diffusion/regression)")
     parser.add_argument("--recipe", choices=["paper", "cpu"], default="paper",
                         help="paper (default): the paper's optimiser (DP lr 1e-4, batch 256; ACT lr 1e-5, batch 8); "
                              "cpu: tuned for a 20-30 minute CPU budget (DP lr 5e-4, batch 128; ACT lr 3e-4, batch 16)")
@@ -59,100 +70,81 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
+def _config_fields(args: argparse.Namespace) -> dict[str, Any]:
+    """Policy config fields set on the command line (each refused by a policy type that lacks it)."""
+    fields: dict[str, Any] = {}
+    if args.unet is not None or args.down_dims:
+        from coursekit.nn.unet1d import UNet1DConfig
+
+        unet = UNet1DConfig.preset(args.unet or "cpu")
+        if args.down_dims:
+            try:
+                dims = tuple(int(v) for v in args.down_dims.split(","))
+            except ValueError:
+                raise ValueError(f"--down-dims must be comma-separated ints like 32,64,128, got {args.down_dims!r}") from None
+            unet = dataclasses.replace(unet, down_dims=dims)
+        fields["unet"] = unet
+    if args.vision is not None:
+        from coursekit.nn.vision import VisionEncoderConfig
+
+        fields["vision"] = VisionEncoderConfig.preset(args.vision)
+    if args.chunk_size is not None:
+        fields["chunk_size"] = args.chunk_size
+    if args.n_action_steps is not None:
+        fields["n_action_steps"] = args.n_action_steps
+    return fields
+
+
 def run(args: argparse.Namespace) -> int:
+    """One flow for every policy type and task: check the output, build, train with callbacks, report."""
+    from coursekit.checkpoint import CheckpointSaver, warm_start
     from coursekit.data.episodes import EpisodeDataset
-    from coursekit.nn.unet1d import UNet1DConfig
-    from coursekit.policies.factory import make_pusht_policy
-    from coursekit.train import TrainConfig
+    from coursekit.data.features import default_features
+    from coursekit.policies import get_policy_class
+    from coursekit.policies.factory import make_policy
+    from coursekit.train import TrainConfig, train
+    from coursekit.viz.run_log import MetricsLog
 
     if args.minutes is None and args.steps is None:
         raise ValueError("give a budget: --minutes M and/or --steps N")
-    if args.policy == "act":
-        return _run_act(args)
-    features = args.features or "pusht_state"
-    if features.startswith("aloha"):
-        raise ValueError(f"--features {features} is for --policy act; diffusion/regression train on PushT features here")
+    _check_out(args.out)
+    fields = _config_fields(args)
+    known = {f.name for f in dataclasses.fields(get_policy_class(args.policy).config_class)}
+    foreign = sorted(set(fields) - known)
+    if foreign:
+        flags = ", ".join("--" + f.replace("_", "-") for f in foreign)
+        raise ValueError(f"{flags} do(es) not apply to --policy {args.policy}")
+    dataset = EpisodeDataset.load(args.data)
+    features = args.features or default_features(dataset.arrays)
     overrides = {"lr": args.lr, "batch_size": args.batch_size or (64 if features == "pusht_image" else None),
                  "warmup_steps": args.warmup_steps, "lr_schedule": args.lr_schedule}
-    config = TrainConfig.recipe(args.recipe, **{k: v for k, v in overrides.items() if v is not None}, max_steps=args.steps, minutes=args.minutes,
-                                seed=args.seed, num_threads=args.threads,
-                                checkpoint_every_minutes=args.checkpoint_every, progress=not args.no_progress)
-    unet = UNet1DConfig.preset(args.unet)
-    if args.down_dims:
-        try:
-            dims = tuple(int(v) for v in args.down_dims.split(","))
-        except ValueError:
-            raise ValueError(f"--down-dims must be comma-separated ints like 32,64,128, got {args.down_dims!r}") from None
-        unet = dataclasses.replace(unet, down_dims=dims)
-    extra = {}
-    if features == "pusht_image":
-        from coursekit.nn.vision import VisionEncoderConfig
-
-        extra["vision"] = VisionEncoderConfig.preset(args.vision)
-    dataset = EpisodeDataset.load(args.data)
-    policy, batches = make_pusht_policy(args.policy, dataset, features=features, batch_size=config.batch_size,
-                                        seed=args.seed, device=args.device, unet=unet,
-                                        n_action_steps=args.n_action_steps, **extra)
+    overrides = {k: v for k, v in overrides.items() if v is not None}
+    policy, batches, recipe = make_policy(args.policy, dataset, features=features, recipe=args.recipe,
+                                          batch_size=overrides.get("batch_size"), seed=args.seed, device=args.device,
+                                          **fields)
+    config = TrainConfig(**{**recipe, **overrides}, max_steps=args.steps, minutes=args.minutes, seed=args.seed,
+                         num_threads=args.threads, checkpoint_every_minutes=args.checkpoint_every,
+                         progress=not args.no_progress)
     meta = {**dataset.meta, "path": str(args.data), "n_steps": dataset.n_steps, "n_episodes": dataset.n_episodes}
-    print(f"{args.policy} policy, {policy.num_parameters() / 1e6:.2f} M parameters, {len(batches)} windows "
-          f"from {dataset.n_episodes} episodes; device {policy.device}")
-    return _train_and_report(policy, batches, config, args, meta)
-
-
-def _run_act(args: argparse.Namespace) -> int:
-    """ACT: the same trainer and checkpoint format; its optimiser recipe from ``act_train_config``."""
-    from coursekit.data.episodes import EpisodeDataset
-    from coursekit.policies.act_factory import act_train_config, make_act_policy
-
-    overrides = {"lr": args.lr, "batch_size": args.batch_size, "warmup_steps": args.warmup_steps,
-                 "lr_schedule": args.lr_schedule}
-    config = act_train_config(args.recipe, **{k: v for k, v in overrides.items() if v is not None},
-                              max_steps=args.steps, minutes=args.minutes, seed=args.seed, num_threads=args.threads,
-                              checkpoint_every_minutes=args.checkpoint_every, progress=not args.no_progress)
-    dataset = EpisodeDataset.load(args.data)
-    extra = {} if args.chunk_size is None else {"chunk_size": args.chunk_size}
-    policy, batches = make_act_policy(dataset, features=args.features, batch_size=config.batch_size, seed=args.seed,
-                                      device=args.device, **extra)
-    meta = {**dataset.meta, "path": str(args.data), "n_steps": dataset.n_steps, "n_episodes": dataset.n_episodes}
-    print(f"act policy ({policy.config.features}), {policy.num_parameters() / 1e6:.2f} M parameters, "
-          f"k = {policy.config.chunk_size}, {dataset.n_episodes} episodes; device {policy.device}")
-    return _train_and_report(policy, batches, config, args, meta)
-
-
-def warm_start(policy, path: Path) -> dict:
-    """Copy the weights of the checkpoint ``path`` into ``policy``; returns that checkpoint's provenance.
-
-    The checkpoint must hold the same policy type with the same config and the same normalisers
-    (i.e. it was trained on the same kind of data): anything else is refused with the difference.
-    Only weights carry over; the optimiser state does not (checkpoints do not store it), so the
-    continued run starts a fresh warm-up + schedule.
-    """
-    from coursekit.checkpoint import CheckpointError, load_checkpoint, read_checkpoint_info
-    from coursekit.config import config_to_dict
-    from coursekit.policies.base import normalizers_to_json
-
-    source = load_checkpoint(path, device=policy.device, expected_type=policy.policy_type)
-    mine, theirs = config_to_dict(policy.config), config_to_dict(source.config)
-    diff = {k: (theirs.get(k), mine.get(k)) for k in sorted(set(mine) | set(theirs)) if mine.get(k) != theirs.get(k)}
-    if diff:
-        raise CheckpointError(f"--init-from {str(path)!r}: its config differs from this run's as (checkpoint, run): {diff}")
-    if normalizers_to_json(source.normalizers) != normalizers_to_json(policy.normalizers):
-        raise CheckpointError(f"--init-from {str(path)!r}: its normalisers differ from those fitted on {policy.policy_type} "
-                              f"training data here; warm-start only on the same demonstrations")
-    policy.load_state_dict(source.state_dict())
-    info = read_checkpoint_info(path)
-    training = info.get("training") or {}
-    return {"path": str(path), **{k: training.get(k) for k in ("steps", "seconds", "samples_per_s", "torch_threads", "init_from")}}
-
-
-def _train_and_report(policy, batches, config, args: argparse.Namespace, meta: dict) -> int:
-    from coursekit.train import train
-
-    prior = warm_start(policy, args.init_from) if getattr(args, "init_from", None) is not None else None
+    print(f"{args.policy} policy on {features}, {policy.num_parameters() / 1e6:.2f} M parameters, {len(batches)} "
+          f"training samples from {dataset.n_episodes} episodes; device {policy.device}")
+    prior = warm_start(policy, args.init_from) if args.init_from is not None else None
     if prior is not None:
         print(f"warm start from {args.init_from} ({prior['steps']} steps, {prior['seconds']} s)")
-    result = train(policy, batches, config, out_dir=args.out, dataset_meta=meta, init_from=prior)
+    with MetricsLog(args.out) as metrics:  # metrics.csv + loss.png beside the checkpoint, during training
+        result = train(policy, batches, config, callbacks=[CheckpointSaver(args.out, dataset_meta=meta), metrics],
+                       init_from=prior)
     s = result.summary
     print(json.dumps({k: s[k] for k in ("steps", "seconds", "samples_per_s", "final_loss")}))
     print(f"wrote {args.out}")
     return 0
+
+
+def _check_out(out: Path) -> None:
+    """Before any work: --out must be a new (or empty) folder; nothing already there is overwritten."""
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {str(out)!r} is a file; give a new run folder")
+    if out.is_dir() and any(out.iterdir()):
+        kind = "an earlier run" if (out / "config.json").is_file() else "not a coursekit run"
+        raise ValueError(f"--out {str(out)!r} is a non-empty folder ({kind}); choose a new run folder "
+                         "(nothing was written)")

@@ -1,5 +1,15 @@
 """Training batches as tensors: one vectorised gather per batch, no per-sample Python.
 
+Two batchers, one per kind of training sample (a policy class declares which it uses):
+
+- :class:`WindowBatcher` (Diffusion Policy and the U-Net policies): windows of To observations
+  and Tp actions, edge-padded (:class:`coursekit.data.SequenceWindows`);
+- :class:`ChunkBatcher` (ACT, Zhao et al. 2023, Sec. IV): the observation at t and the next k
+  actions, zero-padded past the episode's end with an ``action_is_pad`` mask
+  (:class:`coursekit.data.ActionChunks`). Departure: the original draws a random episode, then
+  a random t in it; we draw t uniformly over all steps (shuffled epochs). With equal episode
+  lengths (the scripted ALOHA data: 400 steps each) the two are the same distribution.
+
 The whole dataset lives as tensors (on the training device) and the windows of
 :class:`coursekit.data.SequenceWindows` as one (W, Tp) index tensor, so a batch of B windows is
 
@@ -22,8 +32,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from coursekit.data.chunks import SequenceWindows
-from coursekit.data.episodes import EpisodeDataset
+from coursekit.data.chunks import ActionChunks, SequenceWindows
 
 
 class EpochSampler:
@@ -115,15 +124,59 @@ class WindowBatcher:
             yield self.batch(which)
 
 
-def pusht_training_arrays(dataset: EpisodeDataset, features: str = "pusht_state") -> tuple[dict[str, np.ndarray], np.ndarray]:
-    """PushT demonstrations -> ({"obs": (N, Do) features}, action (N, Da)) for :class:`WindowBatcher`.
+class ChunkBatcher:
+    """Endless ACT training batches ``{"obs": (B, Do), "action": (B, k, Da), "action_is_pad": (B, k)}``.
 
-    ``features`` names a function of :mod:`coursekit.data.features` applied to the "state" array.
+    Args:
+        obs: {"obs": (N, Do)} raw features, optionally "image": (N, C, H, W) uint8.
+        action: (N, Da) raw actions.
+        episode_ends: (E,) exclusive episode ends.
+        chunk_size: k.
+        batch_size: B.
+        seed: seeds the shuffling (deterministic batches).
+        device: where the arrays and batches live.
     """
-    from coursekit.data.features import get_features
 
-    for key in ("state", "action"):
-        if key not in dataset.arrays:
-            raise ValueError(f"dataset lacks the {key!r} array (has {sorted(dataset.arrays)}); "
-                             "expected PushT demonstrations from `coursekit collect pusht`")
-    return {"obs": get_features(features)(dataset["state"])}, np.asarray(dataset["action"], dtype=np.float32)
+    def __init__(self, obs: Mapping[str, Any], action: Any, episode_ends: np.ndarray, *, chunk_size: int = 100,
+                 batch_size: int = 8, seed: int = 0, device: torch.device | str = "cpu") -> None:
+        if "obs" not in obs:
+            raise ValueError(f"ChunkBatcher needs obs['obs'] (N, Do), got keys {sorted(obs)}")
+        device = torch.device(device)
+        self.chunks = ActionChunks.build(episode_ends, chunk_size)
+        n = len(self.chunks)
+        self.obs = {}
+        for k, v in obs.items():
+            t = torch.as_tensor(np.asarray(v))
+            if t.dtype != torch.uint8:
+                t = t.float()
+                if not bool(torch.isfinite(t).all()):
+                    raise ValueError(f"training array {k!r} contains NaN or inf")
+            if len(t) != n:
+                raise ValueError(f"array {k!r} has {len(t)} rows but episode_ends says {n} steps")
+            self.obs[k] = t.to(device)
+        self.action = torch.as_tensor(np.asarray(action), dtype=torch.float32, device=device)  # (N, Da)
+        if len(self.action) != n or not bool(torch.isfinite(self.action).all()):
+            raise ValueError(f"action must be finite with {n} rows, got shape {tuple(self.action.shape)}")
+        self.start = torch.as_tensor(self.chunks.start, device=device)  # (W,)
+        self.index = torch.as_tensor(self.chunks.indices, device=device)  # (W, k)
+        self.is_pad = torch.as_tensor(self.chunks.is_pad, device=device)  # (W, k)
+        self.batch_size = int(batch_size)
+        self.generator = torch.Generator().manual_seed(int(seed))
+        self.sampler = EpochSampler(n, self.batch_size, self.generator)
+
+    def __len__(self) -> int:
+        """Number of windows (one per step)."""
+        return len(self.chunks)
+
+    def batch(self, which: torch.Tensor) -> dict[str, torch.Tensor]:
+        """The windows ``which`` (B,) as a batch dict (see class docstring); padded actions are 0."""
+        which = which.to(self.start.device)
+        pad = self.is_pad[which]  # (B, k)
+        out = {k: v[self.start[which]] for k, v in self.obs.items()}  # (B, Do) / (B, C, H, W)
+        out["action"] = self.action[self.index[which]].masked_fill(pad[..., None], 0.0)  # (B, k, Da)
+        out["action_is_pad"] = pad
+        return out
+
+    def __iter__(self) -> Iterator[dict[str, torch.Tensor]]:
+        for which in self.sampler:
+            yield self.batch(which)

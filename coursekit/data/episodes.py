@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from coursekit.io import atomic_path
+from coursekit.atomic import atomic_path
 
 FORMAT_VERSION = 1
 _META_KEY = "__meta__"

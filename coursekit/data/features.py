@@ -1,25 +1,34 @@
-"""Policy input features computed from PushT states: what the network sees of the world.
+"""Policy input features: what the network sees of the world, for every task, in ONE table.
 
-The simulator never wraps the block angle (demonstrations show it from about -19 to +13 rad), so
-a raw angle must never be min-max scaled: two identical poses would get different inputs and
-the [-1, 1] range would be dominated by a few spinning episodes. Orientation is therefore
-encoded as (sin, cos), which is continuous and identical for angle and angle + 2 pi.
+A policy stores the NAME of its features in its config (``config.features``); the same name
+turns demonstrations into training arrays and live environment observations into policy
+inputs, so training and evaluation can never disagree. Every policy type accepts every entry::
 
-Two feature sets, both pure numpy, vectorised over any leading shape:
+    name             task    reads                   per step (Do)
+    pusht_state      pusht   state (5)               [agent_x, agent_y, block_x, block_y, sin angle, cos angle]  (6)
+    pusht_keypoints  pusht   state (5)               [agent_x, agent_y, kp0_x, kp0_y, ..., kp{K-1}_x, kp{K-1}_y]  (2 + 2K)
+    pusht_image      pusht   state (5) -> image      a 96x96 camera image + agent_pos (2) (obs_type "image")
+    aloha_state      aloha   qpos (14), env_state    [qpos (14), env_state (7 cube | 14 peg + socket)]  (21 or 28)
+    aloha_qpos       aloha   qpos (14)               qpos only: proprioception (cannot see where the object is)
 
-    pusht_state      (..., 6)        [agent_x, agent_y, block_x, block_y, sin(angle), cos(angle)]
-    pusht_keypoints  (..., 2 + 2K)   [agent_x, agent_y, kp0_x, kp0_y, ..., kp{K-1}_x, kp{K-1}_y]
-
+PushT: the simulator never wraps the block angle (demonstrations show it from about -19 to +13
+rad), so a raw angle must never be min-max scaled: two identical poses would get different
+inputs and the [-1, 1] range would be dominated by a few spinning episodes. Orientation is
+therefore encoded as (sin, cos), which is continuous and identical for angle and angle + 2 pi.
 The keypoint variant is the paper's "low-dim" PushT input (Chi et al. 2023, Sec. 5.1: agent
 position plus 2-D keypoints of the T); here the keypoints are those of
 ``coursekit.envs.pusht_geometry.block_keypoints`` (their number K is whatever it returns).
 Features are computed identically for demonstrations (angle unwrapped) and for environment
 observations (angle mod 2 pi): both are functions of sin/cos of the angle only.
+
+Adding a feature set (or a task) is one :class:`FeatureSet` entry in :data:`FEATURES`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -72,20 +81,116 @@ def pusht_keypoint_features(state: np.ndarray) -> np.ndarray:
     return np.concatenate([state[..., :2], kps], axis=-1).astype(np.float32)  # (..., 2 + 2K)
 
 
-FEATURES: dict[str, Callable[[np.ndarray], np.ndarray]] = {
-    "pusht_state": pusht_state_features,
-    "pusht_keypoints": pusht_keypoint_features,
+def aloha_state_features(qpos: np.ndarray, env_state: np.ndarray) -> np.ndarray:
+    """qpos (..., 14), env_state (..., 7 or 14) -> [qpos, env_state] (..., 21 or 28) float32."""
+    return np.concatenate([np.asarray(qpos), np.asarray(env_state)], axis=-1).astype(np.float32)
+
+
+def aloha_qpos_features(qpos: np.ndarray) -> np.ndarray:
+    """qpos (..., 14) -> qpos (..., 14) float32 (proprioception only)."""
+    return np.asarray(qpos, dtype=np.float32)
+
+
+def pusht_agent_pos(state: np.ndarray) -> np.ndarray:
+    """The low-dim part of 'pusht_image': [agent_x, agent_y] (..., 2) of PushT states (..., 5)."""
+    return _check_state(state, "pusht_agent_pos")[..., :2].astype(np.float32)
+
+
+@dataclass(frozen=True)
+class FeatureSet:
+    """One row of the feature table: which task, which per-step arrays, which function."""
+
+    task: str
+    """'pusht' or 'aloha' (the arm pair: transfer_cube and insertion)."""
+    reads: tuple[str, ...]
+    """Per-step arrays the function takes, in order (dataset arrays or env observation keys)."""
+    fn: Callable[..., np.ndarray]
+    """Arrays (..., d_i) in ``reads`` order -> low-dim features (..., Do) float32."""
+    obs_type: str = "low_dim"
+    """'low_dim', or 'image' (a camera image beside the low-dim vector, which is then agent_pos)."""
+
+    def __call__(self, data: Any) -> np.ndarray:
+        """Features of a mapping holding the ``reads`` arrays, or of the one array a one-array set reads."""
+        if not isinstance(data, Mapping):
+            if len(self.reads) != 1:
+                raise ValueError(f"these features read {list(self.reads)}; pass a dict of those arrays")
+            return self.fn(np.asarray(data))
+        missing = [k for k in self.reads if k not in data]
+        if missing:
+            raise ValueError(f"features need arrays {list(self.reads)}; missing {missing} (have {sorted(data)})")
+        return self.fn(*(np.asarray(data[k]) for k in self.reads))
+
+
+FEATURES: dict[str, FeatureSet] = {
+    "pusht_state": FeatureSet("pusht", ("state",), pusht_state_features),
+    "pusht_keypoints": FeatureSet("pusht", ("state",), pusht_keypoint_features),
+    "pusht_image": FeatureSet("pusht", ("state",), pusht_agent_pos, obs_type="image"),
+    "aloha_state": FeatureSet("aloha", ("qpos", "env_state"), aloha_state_features),
+    "aloha_qpos": FeatureSet("aloha", ("qpos",), aloha_qpos_features),
 }
-"""Feature name (stored in a policy's config) -> function from PushT states to features."""
+"""Feature name (stored in a policy's config) -> :class:`FeatureSet`, for every task and policy."""
 
 
-def get_features(name: str) -> Callable[[np.ndarray], np.ndarray]:
-    """The feature function called ``name`` (a key of :data:`FEATURES`)."""
+def get_features(name: str) -> FeatureSet:
+    """The feature set called ``name`` (a key of :data:`FEATURES`); call it on states or a dict of arrays."""
     if name not in FEATURES:
         raise ValueError(f"unknown observation features {name!r}; expected one of {sorted(FEATURES)}")
     return FEATURES[name]
 
 
 def feature_dim(name: str) -> int:
-    """Do, the number of features ``name`` produces per step."""
-    return int(get_features(name)(np.zeros(STATE_DIM)).shape[-1])
+    """Do, the number of low-dim features ``name`` produces per step (PushT sets and aloha_qpos)."""
+    spec = get_features(name)
+    if spec.task == "pusht":
+        return int(spec(np.zeros(STATE_DIM)).shape[-1])
+    if spec.reads == ("qpos",):
+        return 14
+    raise ValueError(f"the dimension of {name!r} depends on the task's objects; read it off the data")
+
+
+def default_features(arrays: Mapping[str, Any]) -> str:
+    """'aloha_state' for arm-pair demonstrations (qpos + env_state), 'pusht_state' for PushT ones."""
+    if "qpos" in arrays and "env_state" in arrays:
+        return "aloha_state"
+    if "state" in arrays:
+        return "pusht_state"
+    raise ValueError(f"cannot tell the task of a dataset with arrays {sorted(arrays)}; pass features=...")
+
+
+def training_arrays(dataset: Any, features: str, image_size: tuple[int, int] = (96, 96)
+                    ) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """Demonstrations -> (observation arrays, action (N, Da) float32) for a batcher and ``fit_normalizers``.
+
+    Low-dim features give ``{"obs": (N, Do)}``; 'pusht_image' gives ``{"image": (N, 3, H, W) uint8,
+    "agent_pos": (N, 2)}``, the images rendered from the stored states with the env's own
+    observation renderer (the dataset keeps states only; 96 x 96 x 3 bytes is 28 kB per step).
+    """
+    spec = get_features(features)
+    if "action" not in dataset.arrays:
+        raise ValueError(f"dataset lacks the 'action' array (has {sorted(dataset.arrays)})")
+    missing = [k for k in spec.reads if k not in dataset.arrays]
+    if missing:
+        raise ValueError(f"features {features!r} ({spec.task} task) need arrays {list(spec.reads)}; the dataset has "
+                         f"{sorted(dataset.arrays)} (demonstrations of another task?)")
+    action = np.asarray(dataset["action"], dtype=np.float32)
+    if spec.obs_type != "image":
+        return {"obs": spec(dataset.arrays)}, action
+    if "image" in dataset.arrays:
+        images = np.asarray(dataset["image"])
+        images = images.transpose(0, 3, 1, 2) if images.shape[-1] == 3 else images  # (N, 3, H, W)
+    else:
+        from coursekit.envs.pusht_render import PushTRenderer
+
+        renderer = PushTRenderer(tuple(image_size))
+        images = np.stack([renderer.render(s) for s in dataset["state"]]).transpose(0, 3, 1, 2)  # (N, 3, H, W)
+    return {"image": np.ascontiguousarray(images, dtype=np.uint8), "agent_pos": spec(dataset.arrays)}, action
+
+
+def env_obs_features(name: str, observations: Sequence[Any]) -> np.ndarray:
+    """B raw env observations (dicts of arrays, or PushT state vectors) -> (B, Do) low-dim features."""
+    first = observations[0]
+    if isinstance(first, Mapping):
+        stacked = {k: np.stack([np.asarray(o[k]) for o in observations]) for k in first}  # (B, ...)
+    else:
+        stacked = {"state": np.stack([np.asarray(o) for o in observations])}  # (B, 5)
+    return get_features(name)(stacked)

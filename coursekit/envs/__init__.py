@@ -5,8 +5,7 @@ Classes load lazily so that PushT never imports mujoco and the arm pair never im
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from coursekit.lazy import lazy_loader
 
 _LAZY = {
     "PushTEnv": "coursekit.envs.pusht",
@@ -14,9 +13,4 @@ _LAZY = {
     "AlohaInsertionEnv": "coursekit.envs.aloha",
 }
 __all__ = sorted(_LAZY)
-
-
-def __getattr__(name: str) -> Any:
-    if name not in _LAZY:
-        raise AttributeError(f"module 'coursekit.envs' has no attribute {name!r}")
-    return getattr(importlib.import_module(_LAZY[name]), name)
+__getattr__, __dir__ = lazy_loader(__name__, _LAZY)

@@ -43,6 +43,7 @@ import pymunk
 from gymnasium import spaces
 
 from coursekit.envs import pusht_geometry as geo
+from coursekit.envs.image_size import size_hw
 
 OBS_TYPES = ("state", "keypoints", "pixels", "pixels_agent_pos")
 
@@ -52,14 +53,6 @@ CONTROL_HZ = 10
 """Env steps (actions) per second: 10 substeps per step."""
 K_P, K_V = 100.0, 20.0
 """PD gains of the pusher's tracking law (reference values)."""
-
-
-def _size_hw(size, name: str) -> tuple[int, int]:
-    """Normalise an image size given as int or (H, W) to (H, W)."""
-    hw = (size, size) if isinstance(size, (int, np.integer)) else tuple(size)
-    if len(hw) != 2 or not all(isinstance(v, (int, np.integer)) and v > 0 for v in hw):
-        raise ValueError(f"{name} must be a positive int or a pair (H, W) of positive ints, got {size!r}")
-    return int(hw[0]), int(hw[1])
 
 
 class PushTEnv(gym.Env):
@@ -86,8 +79,8 @@ class PushTEnv(gym.Env):
             raise ValueError(f"max_episode_steps must be a positive int, got {max_episode_steps!r}")
         self.obs_type = obs_type
         self.render_mode = render_mode
-        self.render_size = _size_hw(render_size, "render_size")
-        self.obs_size = _size_hw(obs_size, "obs_size")
+        self.render_size = size_hw(render_size, "render_size")
+        self.obs_size = size_hw(obs_size, "obs_size")
         self.max_episode_steps = int(max_episode_steps)
         self.goal_pose = geo.GOAL_POSE
         self.dt = 1.0 / SIM_HZ

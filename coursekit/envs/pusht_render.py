@@ -17,6 +17,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from coursekit.envs import pusht_geometry as geo
+from coursekit.envs.image_size import size_hw
 
 WHITE = (255, 255, 255)
 """Background."""
@@ -34,13 +35,6 @@ TARGET_COLOR = (220, 20, 60)
 """CSS Crimson: the action-target cross (render() only, never in observations)."""
 
 
-def _size_hw(size) -> tuple[int, int]:
-    hw = (size, size) if isinstance(size, (int, np.integer)) else tuple(size)
-    if len(hw) != 2 or not all(isinstance(v, (int, np.integer)) and v > 0 for v in hw):
-        raise ValueError(f"size must be a positive int or a pair (H, W) of positive ints, got {size!r}")
-    return int(hw[0]), int(hw[1])
-
-
 class PushTRenderer:
     """Renders PushT states to (H, W, 3) uint8 images; the static part (walls, goal) is drawn once.
 
@@ -51,7 +45,7 @@ class PushTRenderer:
     """
 
     def __init__(self, size=96, supersample: int | None = None):
-        self.height, self.width = _size_hw(size)
+        self.height, self.width = size_hw(size)
         if supersample is None:
             longest = max(self.height, self.width)
             supersample = 4 if longest <= 128 else 2 if longest <= 256 else 1

@@ -1,6 +1,8 @@
 """Executors: turn a chunk predictor (B, To, ...) -> (B, Tp, Da) into one action per step.
 
-Every executor has ``reset(obs (B, ...))`` and ``act(obs (B, ...)) -> (B, Da)``:
+Every executor is built as ``cls.from_spec(predict_chunk, spec)`` from the policy's
+:class:`ExecutionSpec` (:mod:`coursekit.execution.spec`, which also holds the To - 1 + Ta <= Tp
+check), and has ``reset(obs (B, ...))`` and ``act(obs (B, ...)) -> (B, Da)``:
 
 - :class:`RecedingHorizon` (Diffusion Policy): execute Ta actions of each chunk, then re-plan.
 - :class:`TemporalEnsemble` (ACT): predict every step, average the overlapping chunks.
@@ -13,13 +15,14 @@ Classes load lazily (``coursekit.execution.receding`` needs neither torch nor nu
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from coursekit.lazy import lazy_loader
 
 _LAZY = {
     "RecedingHorizon": "coursekit.execution.receding",
     "stack_history": "coursekit.execution.receding",
     "TemporalEnsemble": "coursekit.execution.ensembling",
+    "ExecutionSpec": "coursekit.execution.spec",
+    "check_horizons": "coursekit.execution.spec",
     "CONTROL_HZ": "coursekit.execution.delay",
     "delay_steps": "coursekit.execution.delay",
     "DelayedExecutor": "coursekit.execution.delay",
@@ -30,9 +33,4 @@ _LAZY = {
     "rtc_weights": "coursekit.execution.rtc",
 }
 __all__ = sorted(_LAZY)
-
-
-def __getattr__(name: str) -> Any:
-    if name not in _LAZY:
-        raise AttributeError(f"module 'coursekit.execution' has no attribute {name!r}")
-    return getattr(importlib.import_module(_LAZY[name]), name)
+__getattr__, __dir__ = lazy_loader(__name__, _LAZY)

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -37,6 +37,7 @@ import numpy as np
 from coursekit.envs import pusht_geometry as geo
 from coursekit.experts.pusht_clearance import local_to_world, point_distance, world_to_local
 from coursekit.experts.pusht_config import ExpertConfig
+from coursekit.experts.pusht_recording import PHASE_NAMES, PUSH, REST, SETTLE, TRAVEL, EpisodeRecord, Recorder
 from coursekit.experts.pusht_push_search import Push, PushSearch
 from coursekit.experts.pusht_routes import ANTICLOCKWISE, CLOCKWISE, STRAIGHT, speed_profile_targets
 
@@ -57,38 +58,6 @@ TWO_WAY_START = (100.0, 256.0, 300.0, 256.0, 3 * math.pi / 4)
 """A reset state [ax, ay, bx, by, angle] (``reset_to_state``, legacy order) where the T stands
 between the pusher and the push it wants, with both ways round about equally long: the coin
 decides, so expert runs from this one start split between clockwise and anticlockwise."""
-
-# Phase of each recorded step.
-SETTLE, TRAVEL, PUSH, REST = 0, 1, 2, 3
-PHASE_NAMES = ("settle", "travel", "push", "rest")
-
-
-@dataclass
-class EpisodeRecord:
-    """One expert episode. Row t holds the state BEFORE action t.
-
-    states: (T, 5) [agent_x, agent_y, block_x, block_y, block_angle (unwrapped)].
-    actions: (T, 2) pusher targets.
-    coverage: (T,) coverage of the row's state.
-    phases: (T,) int8 SETTLE / TRAVEL / PUSH / REST.
-    success_step: number of actions after which coverage first passed 0.95 (None: failed);
-        the env's ``terminated``, and what success rates and step counts measure.
-    finish_step: number of actions after which the expert stopped pushing (coverage above 0.95
-        and staying above ``final_coverage`` at rest); usually ``success_step``, later when the
-        first crossing was only in passing. The rest steps follow it.
-    route_choices: one dict per coin toss {"step", "side", "taken", "lengths": [cw, ccw]}.
-    travel_bumps: travel legs that still touched the block after slowing down (expected 0).
-    """
-
-    states: np.ndarray
-    actions: np.ndarray
-    coverage: np.ndarray
-    phases: np.ndarray
-    success_step: int | None
-    finish_step: int | None
-    route_choices: list[dict] = field(default_factory=list)
-    travel_bumps: int = 0
-
 
 class Coin:
     """The seeded coin that picks a side when both ways round are about equally good.
@@ -229,7 +198,7 @@ class PushTExpert:
         if action_noise > 0:
             rng = np.random.default_rng([NOISE_STREAM, int(stream_seed)])
             noise = lambda: rng.normal(0.0, action_noise, size=2)  # noqa: E731  (px, per axis)
-        ep = _Recorder(env, info["coverage"], cfg.max_steps, search.rests_successfully, noise)
+        ep = Recorder(env, info["coverage"], cfg.max_steps, search.rests_successfully, noise)
         self._settle(env, ep)
         choices: list[dict] = []
         bumps = 0
@@ -274,7 +243,7 @@ class PushTExpert:
                 ep.step(env.get_state()[:2], REST, force=True)
         return ep.record(choices, bumps)
 
-    def _settle(self, env, ep: _Recorder) -> None:
+    def _settle(self, env, ep: Recorder) -> None:
         """Hold still while the physics separates an overlapping reset, then step clear."""
         cfg = self.config
         for _ in range(cfg.max_settle_steps):
@@ -288,59 +257,6 @@ class PushTExpert:
         if exit_point is not None:
             ep.follow(speed_profile_targets(np.stack([state[:2], exit_point]), cfg.travel_speed,
                                             cfg.travel_accel, cfg.turn_speed), SETTLE)
-
-
-class _Recorder:
-    """Steps the real env and records (state before the action, action, coverage, phase).
-
-    The episode is done once the coverage has passed 0.95 at a moment when ``rests_well(state)``
-    says it will stay in place at rest (or after ``max_steps``). ``noise()`` (optional, (2,) px)
-    is added to the executed target only; the recorded action stays the expert's.
-    """
-
-    def __init__(self, env, coverage: float, max_steps: int, rests_well, noise=None):
-        self.env, self.max_steps, self.rests_well, self.noise = env, max_steps, rests_well, noise
-        self.coverage = float(coverage)
-        self.rows: list[tuple[np.ndarray, np.ndarray, float, int]] = []
-        self.success_step: int | None = None
-        self.finish_step: int | None = None
-
-    @property
-    def n_steps(self) -> int:
-        return len(self.rows)
-
-    @property
-    def done(self) -> bool:
-        return self.finish_step is not None or self.n_steps >= self.max_steps
-
-    def step(self, target: np.ndarray, phase: int, force: bool = False) -> None:
-        if self.done and not force:
-            return
-        state = self.env.get_state()[:5]
-        action = np.clip(np.asarray(target, dtype=np.float64), 0.0, geo.WORLD_SIZE)
-        self.rows.append((state, action, self.coverage, phase))
-        executed = action if self.noise is None else np.clip(action + self.noise(), 0.0, geo.WORLD_SIZE)
-        _, _, _, _, info = self.env.step(executed)
-        self.coverage = float(info["coverage"])
-        if info["is_success"]:
-            if self.success_step is None:
-                self.success_step = self.n_steps
-            if self.finish_step is None and phase != REST and self.rests_well(self.env.get_state()):
-                self.finish_step = self.n_steps
-
-    def follow(self, targets: np.ndarray, phase: int) -> None:
-        for target in targets:
-            self.step(target, phase)
-
-    def record(self, choices: list[dict], bumps: int) -> EpisodeRecord:
-        if not self.rows:  # nothing to do (e.g. max_steps reached while settling)
-            return EpisodeRecord(np.empty((0, 5)), np.empty((0, 2)), np.empty(0), np.empty(0, np.int8),
-                                 self.success_step, self.finish_step, choices, bumps)
-        states, actions, coverage, phases = zip(*self.rows)
-        return EpisodeRecord(states=np.stack(states), actions=np.stack(actions),
-                             coverage=np.asarray(coverage), phases=np.asarray(phases, dtype=np.int8),
-                             success_step=self.success_step, finish_step=self.finish_step,
-                             route_choices=choices, travel_bumps=bumps)
 
 
 # --------------------------------------------------------------------------------------------

@@ -13,8 +13,7 @@ Nothing here imports torch or pytest at import time.
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from coursekit.lazy import lazy_loader
 
 _LAZY = {
     "EXERCISES": "coursekit.grading.registry:EXERCISES",
@@ -26,17 +25,4 @@ _LAZY = {
 }
 
 __all__ = sorted(_LAZY)
-
-
-def __getattr__(name: str) -> Any:
-    target = _LAZY.get(name)
-    if target is None:
-        raise AttributeError(f"module 'coursekit.grading' has no attribute {name!r}")
-    module_name, _, obj = target.partition(":")
-    value = getattr(importlib.import_module(module_name), obj)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return __all__
+__getattr__, __dir__ = lazy_loader(__name__, _LAZY)

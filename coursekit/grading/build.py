@@ -231,7 +231,7 @@ def build_exercises(root: str | Path | None = None, check: bool = False) -> list
     stale generated modules of exercises no longer registered (deleted unless ``check``).
     Files that already match are not touched.
     """
-    from coursekit.io import atomic_write_text  # local: keeps `import coursekit.grading` minimal
+    from coursekit.atomic import atomic_write_text  # local: keeps `import coursekit.grading` minimal
 
     root = Path(root) if root is not None else repo_root()
     changed: list[Path] = []

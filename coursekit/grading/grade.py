@@ -31,7 +31,7 @@ from pathlib import Path
 from coursekit.grading.paths import repo_root
 from coursekit.grading.registry import EXERCISES, Exercise, exercise_number, get_exercise
 from coursekit.grading.runner import Limits, RunResult, TestScore, read_test_sources, run_tests, score_exercise
-from coursekit.io import atomic_write_text
+from coursekit.atomic import atomic_write_text
 
 _SAFE = re.compile(r"[^A-Za-z0-9._-]+")
 

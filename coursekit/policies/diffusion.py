@@ -83,6 +83,8 @@ class DiffusionPolicy(UNetChunkPolicy):
     policy_type = "diffusion"
     config_class = DiffusionPolicyConfig
     config: DiffusionPolicyConfig
+    eval_overrides = ("n_action_steps", "ddim_timestep_spacing", "ddim_eta")
+    sampling_options = ("sampler", "num_inference_steps", "return_trajectory")
 
     def __init__(self, config: DiffusionPolicyConfig, normalizers: Mapping[str, Normalizer] | None = None):
         super().__init__(config, normalizers)
@@ -113,9 +115,17 @@ class DiffusionPolicy(UNetChunkPolicy):
             return DDPMSampler(self.schedule, num_inference_steps, clip_sample=c.clip_sample)
         raise ValueError(f"sampler must be one of {SAMPLERS}, got {kind!r}")
 
+    def describe_sampling(self, **sampling: Any) -> dict[str, Any]:
+        """Which sampler and how many steps ``predict_chunk(..., **sampling)`` runs (for evaluation reports)."""
+        self.check_sampling(sampling)
+        kind, steps = sampling.get("sampler"), sampling.get("num_inference_steps")
+        used = self.make_sampler(kind, steps)
+        return {"sampler": kind or self.config.sampler, "num_inference_steps": len(used.timesteps),
+                "first_timestep": int(used.timesteps[0])}
+
     @torch.no_grad()
-    def predict_chunk(self, obs_history: Any, sampler: str | None = None, num_inference_steps: int | None = None,
-                      generator: torch.Generator | None = None, return_trajectory: bool = False) -> Any:
+    def predict_chunk(self, obs_history: Any, *, generator: torch.Generator | None = None, sampler: str | None = None,
+                      num_inference_steps: int | None = None, return_trajectory: bool = False) -> Any:
         """Raw history (B, To, Do) (or dict for images; or unbatched (To, Do)) -> raw chunk (B, Tp, Da).
 
         Numpy in, numpy out; tensors in, tensors out. ``sampler``/``num_inference_steps`` override

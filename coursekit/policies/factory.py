@@ -1,88 +1,70 @@
-"""Build a PushT policy and its training batches from demonstrations, in one call.
+"""One call from demonstrations to a policy ready to train: ``make_policy``, for every policy and task.
 
-    policy, batches = make_pusht_policy("diffusion", dataset, features="pusht_state")
-    result = coursekit.train.train(policy, batches, TrainConfig(minutes=20))
+    policy, batches, recipe = make_policy("diffusion", dataset, features="pusht_keypoints", recipe="cpu")
+    result = coursekit.train.train(policy, batches, TrainConfig(**recipe, minutes=20))
 
-The policy's config gets Do/Da from the data, its min-max normalisers are fitted on the data,
-and the batcher gathers (B, To, Do) / (B, Tp, Da) windows of the same To/Tp/Ta.
+The policy type names a class in the registry (:data:`coursekit.policies.POLICY_TYPES`); the
+features name a row of the one feature table (:data:`coursekit.data.features.FEATURES`), so any
+policy trains on any task. The class itself says the rest: its config from the data's Do / Da
+(``make_config``), its normalisers fitted on the data (``fit_normalizers``), its kind of
+training sample (``make_batcher``) and its named optimiser recipes (``recipes``).
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, NamedTuple
 
-import numpy as np
 import torch
 
-from coursekit.data.batches import WindowBatcher, pusht_training_arrays
-from coursekit.data.episodes import EpisodeDataset
-
-UNET_POLICIES = ("diffusion", "regression")
+from coursekit.data.features import default_features, get_features, training_arrays
 
 
-def make_unet_config(policy_type: str, **kwargs: Any) -> Any:
-    """The config dataclass of 'diffusion' or 'regression' from keyword fields."""
-    if policy_type == "diffusion":
-        from coursekit.policies.diffusion import DiffusionPolicyConfig
+class PolicySetup(NamedTuple):
+    """What :func:`make_policy` returns (unpacks as ``policy, batches, recipe``)."""
 
-        return DiffusionPolicyConfig(**kwargs)
-    if policy_type == "regression":
-        from coursekit.policies.regression import RegressionPolicyConfig
-
-        return RegressionPolicyConfig(**kwargs)
-    raise ValueError(f"policy_type must be one of {UNET_POLICIES}, got {policy_type!r}")
+    policy: Any
+    """A fresh ChunkPolicy: weights seeded, normalisers fitted, on the requested device."""
+    batches: Any
+    """Its endless, seeded training batches (``WindowBatcher`` or ``ChunkBatcher``)."""
+    recipe: dict[str, Any]
+    """TrainConfig fields of the named recipe (optimiser, schedule, EMA, batch size); add a budget."""
 
 
-def pusht_image_arrays(dataset: EpisodeDataset, size: tuple[int, int] = (96, 96)) -> tuple[dict[str, np.ndarray], np.ndarray]:
-    """PushT demonstrations -> ({"image": (N, 3, H, W) uint8, "agent_pos": (N, 2)}, action (N, 2)).
-
-    Images are rendered from the stored states with the env's own observation renderer (the
-    dataset keeps states only; N x 96 x 96 x 3 bytes is about 28 kB per step).
-    """
-    from coursekit.envs.pusht_render import PushTRenderer
-
-    if "image" in dataset.arrays:
-        images = np.asarray(dataset["image"])
-        images = images.transpose(0, 3, 1, 2) if images.shape[-1] == 3 else images  # (N, 3, H, W)
-    else:
-        renderer = PushTRenderer(size)
-        images = np.stack([renderer.render(s) for s in dataset["state"]]).transpose(0, 3, 1, 2)  # (N, 3, H, W)
-    obs = {"image": np.ascontiguousarray(images, dtype=np.uint8),
-           "agent_pos": np.asarray(dataset["state"][:, :2], dtype=np.float32)}  # (N, 2)
-    return obs, np.asarray(dataset["action"], dtype=np.float32)
-
-
-def make_pusht_policy(policy_type: str, dataset: EpisodeDataset, features: str = "pusht_state",
-                      batch_size: int = 256, seed: int = 0, device: Any = "cpu",
-                      **config_kwargs: Any) -> tuple[Any, WindowBatcher]:
-    """A fresh policy (weights seeded by ``seed``, normalisers fitted) and its seeded batcher.
+def make_policy(policy_type: str, dataset: Any, *, features: str | None = None, recipe: str = "paper",
+                batch_size: int | None = None, seed: int = 0, device: Any = "cpu", **config: Any) -> PolicySetup:
+    """A fresh policy of ``policy_type`` for ``dataset``, its seeded batcher and its training recipe.
 
     Args:
-        policy_type: 'diffusion' or 'regression'.
-        dataset: PushT demonstrations with "state" (N, 5) and "action" (N, 2).
-        features: 'pusht_state', 'pusht_keypoints' (low-dim) or 'pusht_image'.
-        batch_size, seed, device: of the batcher (and the weight initialisation).
-        config_kwargs: further config fields (n_action_steps=..., unet=UNet1DConfig(...), ...).
+        policy_type: a key of ``POLICY_TYPES`` ('diffusion', 'regression', 'act', ...).
+        dataset: an :class:`~coursekit.data.EpisodeDataset` with "action" and the arrays ``features`` reads.
+        features: a key of ``FEATURES`` (default: 'pusht_state' for PushT data, 'aloha_state' for the arm pair).
+        recipe: a key of the class's ``recipes`` ("paper" or "cpu"); sets the batch size unless given.
+        batch_size, seed, device: of the batcher (``seed`` also seeds the weight initialisation).
+        config: further config fields (n_action_steps=..., unet=UNet1DConfig(...), chunk_size=...,
+            ``preset="paper"`` for ACT's paper size, ...).
     """
     from coursekit.device import resolve_device
-
-    device = resolve_device(device)
-    if features == "pusht_image":
-        config = make_unet_config(policy_type, obs_type="image", features=features, obs_dim=2,
-                                  action_dim=int(dataset["action"].shape[-1]), **config_kwargs)
-        obs, action = pusht_image_arrays(dataset, config.vision.image_size)
-    else:
-        obs, action = pusht_training_arrays(dataset, features)
-        config = make_unet_config(policy_type, features=features, obs_dim=int(obs["obs"].shape[-1]),
-                                  action_dim=int(action.shape[-1]), **config_kwargs)
     from coursekit.policies import get_policy_class
 
+    cls = get_policy_class(policy_type)
+    if recipe not in cls.recipes:
+        raise ValueError(f"unknown training recipe {recipe!r} for {policy_type!r}; expected one of {sorted(cls.recipes)}")
+    train_fields = dict(cls.recipes[recipe])
+    if batch_size is not None:
+        train_fields["batch_size"] = int(batch_size)
+    device = resolve_device(device)
+    features = features or default_features(dataset.arrays)
+    spec = get_features(features)
+    low = spec(dataset.arrays)  # (N, Do): the low-dim part (image features: agent_pos)
+    cfg = cls.make_config(features=features, obs_type=spec.obs_type, obs_dim=int(low.shape[-1]),
+                          action_dim=int(dataset["action"].shape[-1]), **config)
+    vision = getattr(cfg, "vision", None)
+    obs, action = training_arrays(dataset, features, **({"image_size": vision.image_size} if vision else {}))
     with torch.random.fork_rng(devices=[]):  # seeded init without disturbing the caller's generator
         torch.manual_seed(seed)
-        policy = get_policy_class(policy_type)(config)
+        policy = cls(cfg)
     policy.fit_normalizers(obs, action)
     policy.to(device)
-    batches = WindowBatcher(obs, action, dataset.episode_ends, horizon=config.horizon,
-                            n_obs_steps=config.n_obs_steps, n_action_steps=config.n_action_steps,
-                            batch_size=batch_size, seed=seed, device=device)
-    return policy, batches
+    batches = policy.make_batcher(obs, action, dataset.episode_ends, batch_size=train_fields.get("batch_size", 256),
+                                  seed=seed, device=device)
+    return PolicySetup(policy, batches, train_fields)

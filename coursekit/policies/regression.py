@@ -50,11 +50,11 @@ class RegressionPolicy(UNetChunkPolicy):
         return {"loss": F.mse_loss(self._forward(cond), action_n)}
 
     @torch.no_grad()
-    def predict_chunk(self, obs_history: Any, **_: Any) -> Any:
+    def predict_chunk(self, obs_history: Any, *, generator: torch.Generator | None = None) -> Any:
         """Raw history (B, To, Do) (or dict; or unbatched (To, Do)) -> raw chunk (B, Tp, Da).
 
-        Sampler arguments (``sampler``, ``generator``, ...) are accepted and ignored, so evaluation
-        code can treat both policies alike.
+        Deterministic: ``generator`` is accepted (the shared contract) and unused; there are no
+        sampling options.
         """
         self._require_normalizers()
         obs, unbatched = self._obs_dict(obs_history)

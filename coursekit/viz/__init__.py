@@ -14,9 +14,7 @@ name below pulls its module (and that module's heavy imports) on first use.
 
 from __future__ import annotations
 
-import importlib
-import importlib.util
-from typing import Any
+from coursekit.lazy import lazy_loader
 
 _LAZY = {
     "MeshcatScene": "coursekit.viz.meshcat_scene",
@@ -35,15 +33,4 @@ _LAZY = {
     "write_replay": "coursekit.viz.replay",
 }
 __all__ = sorted(_LAZY)
-
-
-def __getattr__(name: str) -> Any:
-    if name in _LAZY:
-        return getattr(importlib.import_module(_LAZY[name]), name)
-    if not name.startswith("_") and importlib.util.find_spec(f"{__name__}.{name}") is not None:
-        return importlib.import_module(f"{__name__}.{name}")  # a submodule, e.g. coursekit.viz.pusht_plots
-    raise AttributeError(f"module 'coursekit.viz' has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return __all__
+__getattr__, __dir__ = lazy_loader(__name__, _LAZY, submodules=True)

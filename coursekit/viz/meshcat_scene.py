@@ -40,7 +40,7 @@ import meshcat
 import numpy as np
 import zmq
 
-from coursekit.io import atomic_write_text
+from coursekit.atomic import atomic_write_text
 
 # The camera object meshcat's viewer creates at start-up (see meshcat's viewer ``create_camera``).
 CAMERA_PATH = "/Cameras/default/rotated/<object>"

@@ -324,7 +324,7 @@ def write_replay(out_dir: str | os.PathLike, task: str, episodes: Sequence[Episo
 
     Everything is checked, drawn and rendered before the first byte is written.
     """
-    from coursekit.io import atomic_write_bytes, atomic_write_text
+    from coursekit.atomic import atomic_write_bytes, atomic_write_text
 
     if task not in TASKS:
         raise ValueError(f"unknown task {task!r}; expected one of {list(TASKS)}")

@@ -103,7 +103,7 @@ def plot_metrics(metrics_csv: str | Path, out_png: str | Path) -> Path:
     from matplotlib.figure import Figure
     from matplotlib.ticker import FuncFormatter
 
-    from coursekit.io import atomic_path
+    from coursekit.atomic import atomic_path
 
     path = Path(metrics_csv)
     m = read_metrics(path)

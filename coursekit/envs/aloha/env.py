@@ -44,16 +44,9 @@ from coursekit.envs.aloha.model import (
 )
 from coursekit.envs.aloha.render import CameraRenderer
 from coursekit.envs.aloha.tasks import TASKS, AlohaTask
+from coursekit.envs.image_size import size_hw
 
 OBS_TYPES = ("state", "pixels")
-
-
-def _image_size(size: int | tuple[int, int]) -> tuple[int, int]:
-    if isinstance(size, (int, np.integer)):
-        return int(size), int(size)
-    if len(size) != 2:
-        raise ValueError(f"render_size must be an int or (height, width), got {size!r}")
-    return int(size[0]), int(size[1])
 
 
 class AlohaEnv(gymnasium.Env):
@@ -84,7 +77,7 @@ class AlohaEnv(gymnasium.Env):
         self.task_name = task
         self.obs_type = obs_type
         self.render_mode = render_mode
-        self.render_size = _image_size(render_size)
+        self.render_size = size_hw(render_size, "render_size")
         self.camera = camera
         self.max_episode_steps = max_episode_steps
 
@@ -172,7 +165,7 @@ class AlohaEnv(gymnasium.Env):
 
     def render_camera(self, camera: str = "top", size: int | tuple[int, int] | None = None) -> np.ndarray:
         """(H, W, 3) uint8 image of the current state from ``camera`` (default size: render_size)."""
-        h, w = _image_size(size) if size is not None else self.render_size
+        h, w = size_hw(size, "size") if size is not None else self.render_size
         if self._renderer is None or (self._renderer.height, self._renderer.width) != (h, w):
             self.close()
             self._renderer = CameraRenderer(self.model, h, w)

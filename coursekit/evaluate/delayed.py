@@ -2,7 +2,7 @@
 
     evaluate_delayed(policy, "pusht", "rtc", delay=2, seeds=heldout_seeds(50))
 
-runs the generic closed-loop :func:`~coursekit.evaluate.rollout` with a delay-aware executor
+runs the generic closed-loop :func:`~coursekit.evaluate.closed_loop.rollout` with a delay-aware executor
 (:mod:`coursekit.execution.delay`, :mod:`coursekit.execution.rtc`). One torch generator, seeded
 by ``seed``, draws every chunk's noise (guided or not), so a run is deterministic. Also here:
 the chunk latency of a policy on this CPU (ms per chunk -> d at the task's control rate) and
@@ -34,50 +34,9 @@ def check_strategy(strategy: str, policy: Any) -> None:
                          f"not {getattr(policy, 'policy_type', type(policy).__name__)!r}")
 
 
-class _PushTParts:
-    """PRE-MERGE STAND-IN for coursekit.evaluate's PushT adapter (removed once the evaluate package lands)."""
-
-    max_steps = 300
-
-    def __init__(self, policy: Any) -> None:
-        from coursekit.evaluate import pusht_obs_adapter
-
-        self.env_kwargs, self.obs_fn = pusht_obs_adapter(policy)
-
-    def make_env(self, max_steps: int) -> Any:
-        from coursekit.envs.pusht import PushTEnv
-
-        return PushTEnv(max_episode_steps=max_steps, **self.env_kwargs)
-
-    def state_fn(self, env: Any) -> np.ndarray:
-        return np.asarray(env.unwrapped.get_state(), dtype=np.float64)
-
-    def metrics(self, result: Any) -> dict[str, Any]:
-        return {}
-
-
-def _spec(policy: Any) -> Any:
-    """The policy's ExecutionSpec (PRE-MERGE STAND-IN where policies lack ``execution_spec``)."""
-    if hasattr(policy, "execution_spec"):
-        return policy.execution_spec()
-    from types import SimpleNamespace
-
-    c = policy.config
-    if policy.policy_type == "act":
-        return SimpleNamespace(n_obs_steps=1, horizon=c.chunk_size, n_action_steps=c.n_action_steps or c.chunk_size,
-                               ensemble_decay=c.ensemble_decay)
-    return SimpleNamespace(n_obs_steps=c.n_obs_steps, horizon=c.horizon, n_action_steps=c.n_action_steps,
-                           ensemble_decay=0.01)
-
-
 def _adapter(policy: Any, task: str) -> Any:
-    """The task adapter (make_env(max_steps), obs_fn, state_fn, max_steps, metrics) of ``task`` for ``policy``."""
-    try:
-        from coursekit.evaluate import make_adapter
-    except ImportError:
-        if task != "pusht":
-            raise
-        return _PushTParts(policy)
+    from coursekit.evaluate.tasks import make_adapter
+
     return make_adapter(task, policy)
 
 
@@ -95,7 +54,8 @@ def evaluate_delayed(policy: Any, task: str, strategy: str, delay: int, seeds: S
     """
     import torch
 
-    from coursekit.evaluate import check_seeds_disjoint, rollout
+    from coursekit.evaluate.closed_loop import rollout
+    from coursekit.evaluate.result import check_seeds_disjoint
     from coursekit.policies.inpainting import predict_inpainted
 
     check_strategy(strategy, policy)
@@ -124,7 +84,7 @@ def evaluate_delayed(policy: Any, task: str, strategy: str, delay: int, seeds: S
 
     def factory(pc: Callable[[Any], Any]) -> Any:
         extra = {"predict_inpainted": guided_chunk, "schedule": schedule} if strategy == "rtc" else {}
-        made.append(STRATEGIES[strategy].from_spec(pc, _spec(policy), delay=int(delay), **extra))
+        made.append(STRATEGIES[strategy].from_spec(pc, policy.execution_spec(), delay=int(delay), **extra))
         return made[-1]
 
     record = record or bool(getattr(adapter, "record_always", False))
@@ -180,10 +140,10 @@ def chunk_latency_ms(policy: Any, task: str, *, sampling: Mapping[str, Any] | No
     env = adapter.make_env(10)
     obs, _ = env.reset(seed=200000 + int(seed))  # a validation seed
     env.close()
-    history = stack_history([adapter.obs_fn([obs])] * _spec(policy).n_obs_steps)  # (1, To, ...)
+    history = stack_history([adapter.obs_fn([obs])] * policy.execution_spec().n_obs_steps)  # (1, To, ...)
     gen = torch.Generator().manual_seed(int(seed))
     if guided:
-        spec = _spec(policy)
+        spec = policy.execution_spec()
         n = spec.horizon - (spec.n_obs_steps - 1)
         target, weights = np.zeros((1, n, policy.config.action_dim)), np.linspace(1.0, 0.0, n)
 

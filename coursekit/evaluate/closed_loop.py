@@ -1,0 +1,171 @@
+"""Closed-loop evaluation, the generic part: many seeded episodes in lock-step, one network call per chunk.
+
+:func:`rollout` is policy- and task-agnostic: B environments step together, an executor
+(receding horizon, temporal ensembling, or a student's class) turns chunks into actions, and
+finished episodes are frozen while the others go on. :func:`evaluate` runs a policy through it
+on one task, described by a :class:`TaskAdapter` (``coursekit.evaluate.pusht``,
+``coursekit.evaluate.aloha``): how to build the env, read observations as policy inputs,
+record a state per step and score an episode. Everything is seeded, so a run is reproducible.
+
+Adding a task is one adapter class and one entry in ``coursekit.evaluate.tasks.TASKS``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, Protocol
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from coursekit.evaluate.result import EvalResult, check_seeds_disjoint
+
+
+class TaskAdapter(Protocol):
+    """What :func:`evaluate` needs to know about a task (PushT, the arm pair, ...)."""
+
+    task: str
+    """Task name: 'pusht', 'transfer_cube', 'insertion'."""
+    max_steps: int
+    """Protocol steps per episode (PushT 300, arm pair 400)."""
+    record_always: bool
+    """True when :meth:`metrics` needs the recorded states (the arm pair's stages)."""
+
+    def make_env(self, max_steps: int) -> Any:
+        """One gymnasium environment with a ``max_steps`` step limit."""
+
+    def obs_fn(self, observations: list[Any]) -> Any:
+        """B raw env observations -> the policy's per-step input (B, ...) (array or dict)."""
+
+    def state_fn(self, env: Any) -> np.ndarray:
+        """The state recorded per step (S,)."""
+
+    def metrics(self, result: EvalResult) -> dict[str, Any]:
+        """Task-specific figures for ``result.info``."""
+
+    def replay_states(self, result: EvalResult) -> np.ndarray:
+        """(N, T + 1, S') states a replay draws: PushT [agent x, y, block x, y, angle]; arm pair MuJoCo qpos."""
+
+    def episode_scores(self, result: EvalResult) -> tuple[np.ndarray, np.ndarray]:
+        """(score (N,), success (N,)) of each episode, as the task's protocol reports them."""
+
+
+def rollout(predict_chunk: Callable[[Any], Any], make_env: Callable[[], Any], obs_fn: Callable[[list[Any]], Any],
+            seeds: Sequence[int], executor_factory: Callable[[Callable[[Any], Any]], Any], max_steps: int = 300,
+            progress: bool = True, record: bool = False, state_fn: Callable[[Any], np.ndarray] | None = None,
+            desc: str = "eval") -> EvalResult:
+    """Run one episode per seed, all environments in lock-step, and collect the outcomes.
+
+    Args:
+        predict_chunk: (B, To, ...) observation history -> (B, Tp, Da) chunk (raw units).
+        make_env: builds one gymnasium environment (called len(seeds) times).
+        obs_fn: list of B raw env observations -> the policy's per-step input (B, ...) (array or dict).
+        seeds: reset seed of each episode.
+        executor_factory: predict_chunk -> executor with ``reset(obs)`` / ``act(obs) -> (B, Da)``.
+        max_steps: step limit per episode.
+        record: keep states (via ``state_fn(env)``, default ``env.unwrapped.get_state()``) and actions.
+    """
+    if len(seeds) == 0:
+        raise ValueError("rollout needs at least one seed")
+    timing = {"calls": 0, "seconds": 0.0}
+
+    def timed(obs_history: Any) -> Any:
+        t0 = time.perf_counter()
+        out = predict_chunk(obs_history)
+        timing["seconds"] += time.perf_counter() - t0
+        timing["calls"] += 1
+        return out
+
+    state_fn = state_fn or (lambda env: np.asarray(env.unwrapped.get_state(), dtype=np.float64))
+    start = time.perf_counter()
+    envs = [make_env() for _ in seeds]
+    n = len(envs)
+    obs = [env.reset(seed=int(s))[0] for env, s in zip(envs, seeds)]
+    executor = executor_factory(timed)
+    executor.reset(obs_fn(obs))
+    executor_name = type(executor).__name__
+    max_reward = np.zeros(n)
+    success = np.zeros(n, dtype=bool)
+    length = np.zeros(n, dtype=np.int64)
+    done = np.zeros(n, dtype=bool)
+    states = [[state_fn(e)] for e in envs] if record else None
+    actions: list[list[np.ndarray]] | None = [[] for _ in envs] if record else None
+    bar = tqdm(range(max_steps), desc=desc, disable=not progress, dynamic_ncols=True, leave=False)
+    try:
+        for _ in bar:
+            act = executor.act(obs_fn(obs))
+            act = act.detach().cpu().numpy() if hasattr(act, "detach") else np.asarray(act)  # (B, Da)
+            for i, env in enumerate(envs):
+                if done[i]:
+                    continue
+                obs[i], reward, terminated, truncated, info = env.step(act[i])
+                max_reward[i] = max(max_reward[i], float(reward))
+                success[i] |= bool(info.get("is_success", terminated))
+                length[i] += 1
+                done[i] = terminated or truncated
+                if record:
+                    states[i].append(state_fn(env))
+                    actions[i].append(np.asarray(act[i], dtype=np.float64))
+            bar.set_postfix(score=f"{max_reward.mean():.3f}", done=f"{int(done.sum())}/{n}")
+            if done.all():
+                break
+    finally:
+        bar.close()
+        for env in envs:
+            env.close()
+    if record:  # pad finished episodes with their last state/action so the arrays are rectangular
+        t_max = max(len(a) for a in actions)
+        states = np.stack([np.stack(s + [s[-1]] * (t_max + 1 - len(s))) for s in states])  # (N, T+1, S)
+        actions = np.stack([np.stack(a + [a[-1]] * (t_max - len(a))) if a else np.zeros((t_max, act.shape[-1]))
+                            for a in actions])  # (N, T, Da)
+    return EvalResult(seeds=[int(s) for s in seeds], max_reward=max_reward, success=success, length=length,
+                      seconds=time.perf_counter() - start, chunk_calls=timing["calls"],
+                      chunk_seconds=timing["seconds"], states=states, actions=actions,
+                      info={"executor": executor_name})
+
+
+def evaluate(policy: Any, adapter: TaskAdapter, seeds: Sequence[int], *, max_steps: int | None = None,
+             sampling: Mapping[str, Any] | None = None, seed: int = 0, executor_cls: Any = None,
+             executor_factory: Callable[[Callable[[Any], Any]], Any] | None = None,
+             dataset_meta: dict[str, Any] | None = None, progress: bool = True, record: bool = False) -> EvalResult:
+    """Run ``policy`` on ``adapter``'s task from each of ``seeds``; the one evaluation flow of every policy.
+
+    Args:
+        policy: a ChunkPolicy; ``policy.predict_chunk(obs, generator=g, **sampling)`` is called.
+        adapter: the task (:class:`TaskAdapter`).
+        seeds: reset seed of each episode (held-out: from 100000); overlap with ``dataset_meta``'s
+            demonstration seeds is refused.
+        max_steps: steps per episode (default: the task's protocol).
+        sampling: the policy's sampling options (diffusion: sampler, num_inference_steps), checked first.
+        seed: seeds the generator of the policy's sampling noise (the evaluation is deterministic).
+        executor_cls: replaces the policy's default executor class (built with ``from_spec``);
+            executor_factory: ``predict_chunk -> executor``, full control instead.
+        record: keep per-step states and actions (always on when the task's metrics need them).
+    """
+    import torch
+
+    sampling = dict(sampling or {})
+    policy.check_sampling(sampling)
+    described = policy.describe_sampling(**sampling)
+    seeds = [int(s) for s in seeds]
+    check_seeds_disjoint(seeds, dataset_meta)
+    max_steps = adapter.max_steps if max_steps is None else int(max_steps)
+    generator = torch.Generator().manual_seed(int(seed))
+    policy.eval()
+    policy.reset()
+
+    def predict_chunk(obs_history: Any) -> Any:
+        return policy.predict_chunk(obs_history, generator=generator, **sampling)
+
+    factory = executor_factory or (lambda pc: policy.make_executor(pc, executor_cls=executor_cls))
+    result = rollout(predict_chunk, lambda: adapter.make_env(max_steps), adapter.obs_fn, seeds, factory,
+                     max_steps=max_steps, progress=progress, record=record or adapter.record_always,
+                     state_fn=adapter.state_fn, desc=f"eval {policy.policy_type} {adapter.task}")
+    spec = policy.execution_spec()
+    result.info.update({"policy_type": policy.policy_type, "task": adapter.task, "max_steps": max_steps,
+                        "sampling_seed": seed, "n_action_steps": spec.n_action_steps,
+                        "temporal_ensembling": spec.temporal_ensembling,
+                        "ensemble_decay": spec.ensemble_decay if spec.temporal_ensembling else None,
+                        **described, **adapter.metrics(result)})
+    return result
