@@ -9,12 +9,25 @@ STAMP  := $(VENV)/.installed
 
 .PHONY: setup demo lab test test-fast exercises bench clean browser
 
-$(STAMP): environment.txt pyproject.toml
+# The notebooks' kernel, installed inside .venv (never over the user's own "python3" kernelspec).
+KERNEL := coursekit
+# nbstripout's output-stripping git filter; --keep-id keeps the notebooks' cell ids, and the extra
+# keys are what JupyterLab adds on save, so after a Run All `git status` stays clean.
+NBSTRIP_CLEAN := "$(abspath $(PY))" -m nbstripout --keep-id
+NBSTRIP_KEYS  := metadata.language_info metadata.jupytext metadata.toc cell.metadata.lines_to_next_cell
+
+$(STAMP): environment.txt pyproject.toml Makefile
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q -r environment.txt
 	$(PY) -m pip install -q --no-deps --no-build-isolation -e .
-	$(PY) -m ipykernel install --user --name python3 >/dev/null
+	$(PY) -m ipykernel install --sys-prefix --name $(KERNEL) --display-name "Python (coursekit)" >/dev/null
+	@if git rev-parse --is-inside-work-tree >/dev/null 2>&1; then \
+	  $(VENV)/bin/nbstripout --install && \
+	  git config filter.nbstripout.clean '$(NBSTRIP_CLEAN)' && \
+	  git config diff.ipynb.textconv '$(NBSTRIP_CLEAN) -t' && \
+	  git config filter.nbstripout.extrakeys '$(NBSTRIP_KEYS)'; \
+	fi
 	@touch $(STAMP)
 
 setup: $(STAMP)
@@ -24,8 +37,10 @@ demo: setup
 	$(VENV)/bin/coursekit demo
 
 ## JupyterLab on the course notebooks.
+## Course notebooks are saved without outputs (coursekit/viz/notebook_save.py): git stays clean.
 lab: setup
-	$(VENV)/bin/jupyter lab notebooks/ $(if $(filter 0,$(shell id -u)),--allow-root,)
+	$(VENV)/bin/jupyter lab notebooks/ --ContentsManager.pre_save_hook=coursekit.viz.notebook_save.strip_before_save \
+	  $(if $(filter 0,$(shell id -u)),--allow-root,)
 
 ## Debian's chromium for the real-browser tests (only when missing and we are root).
 browser:

@@ -164,6 +164,33 @@ def read_checkpoint_info(path: str | os.PathLike) -> dict[str, Any]:
     return info
 
 
+def training_budget(info: dict[str, Any] | str | os.PathLike) -> dict[str, Any]:
+    """How much training is behind a checkpoint: steps and wall-clock time, whole history included.
+
+    A run that continued from another (``training["init_from"]``, e.g. the shipped PushT model:
+    20 minutes, then 40 more) records each segment separately; this sums the chain.
+
+    Args:
+        info: a checkpoint directory or its parsed config.json (``read_checkpoint_info``).
+
+    Returns:
+        {"steps": int | None, "seconds": float | None, "minutes": float | None, "segments": int};
+        None where a segment did not record the figure.
+    """
+    if not isinstance(info, dict):
+        info = read_checkpoint_info(info)
+    segment, segments, steps, seconds = info.get("training") or None, 0, 0, 0.0
+    while isinstance(segment, dict) and segments < 100:  # a chain, never a cycle: cap it anyway
+        segments += 1
+        steps = None if steps is None or segment.get("steps") is None else steps + int(segment["steps"])
+        seconds = None if seconds is None or segment.get("seconds") is None else seconds + float(segment["seconds"])
+        segment = segment.get("init_from")
+    if segments == 0:
+        steps = seconds = None
+    return {"steps": steps, "seconds": seconds, "minutes": None if seconds is None else seconds / 60.0,
+            "segments": segments}
+
+
 def load_checkpoint(path: str | os.PathLike, device: Any = "auto", expected_type: str | None = None) -> Any:
     """Rebuild the policy saved in ``path`` (in eval mode, on ``device``); refuse anything inconsistent.
 

@@ -303,6 +303,7 @@ def train(policy: Any, batches: Iterable[dict[str, Any]], config: TrainConfig, *
                 _notify(callbacks, "on_checkpoint", ema.model if ema else policy,
                         {**summary(now - start), "complete": False})
                 last_ckpt = time.perf_counter()
+        bar.total = bar.n  # the budget is used up: end full and green (a time bar stops a second short)
     finally:
         bar.close()
         if config.num_threads is not None:

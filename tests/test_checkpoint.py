@@ -166,6 +166,17 @@ def test_copy_checkpoint_half_keeps_provenance(saved, tmp_path):
         torch.testing.assert_close(b, a.half().float(), msg=name)
 
 
+def test_training_budget_sums_the_init_from_chain(tmp_path):
+    from coursekit.checkpoint import training_budget
+
+    info = {"training": {"steps": 10749, "seconds": 2400.0, "init_from": {"steps": 8510, "seconds": 1200.0, "init_from": None}}}
+    assert training_budget(info) == {"steps": 19259, "seconds": 3600.0, "minutes": 60.0, "segments": 2}
+    assert training_budget({"training": {"steps": 5, "init_from": {"steps": 3}}})["seconds"] is None
+    assert training_budget({}) == {"steps": None, "seconds": None, "minutes": None, "segments": 0}
+    with pytest.raises(FileNotFoundError):
+        training_budget(tmp_path / "missing")
+
+
 def test_resaving_keeps_the_run_folders_other_files(saved):
     """A training run re-saves its checkpoint into a folder that also holds metrics.csv: nothing else is lost,
     and a writer holding the CSV open keeps writing into the new folder (the file is carried over, not copied)."""

@@ -91,9 +91,9 @@ def rollout(predict_chunk: Callable[[Any], Any], make_env: Callable[[], Any], ob
     done = np.zeros(n, dtype=bool)
     states = [[state_fn(e)] for e in envs] if record else None
     actions: list[list[np.ndarray]] | None = [[] for _ in envs] if record else None
-    bar = tqdm(range(max_steps), desc=desc, disable=not progress, dynamic_ncols=True, leave=False)
+    bar = tqdm(total=max_steps, desc=desc, disable=not progress, dynamic_ncols=True)
     try:
-        for _ in bar:
+        for _ in range(max_steps):
             act = executor.act(obs_fn(obs))
             act = act.detach().cpu().numpy() if hasattr(act, "detach") else np.asarray(act)  # (B, Da)
             for i, env in enumerate(envs):
@@ -107,9 +107,11 @@ def rollout(predict_chunk: Callable[[Any], Any], make_env: Callable[[], Any], ob
                 if record:
                     states[i].append(state_fn(env))
                     actions[i].append(np.asarray(act[i], dtype=np.float64))
+            bar.update(1)
             bar.set_postfix(score=f"{max_reward.mean():.3f}", done=f"{int(done.sum())}/{n}")
             if done.all():
                 break
+        bar.total = bar.n  # finished (all done, or max_steps): the bar ends full and green, not red
     finally:
         bar.close()
         for env in envs:

@@ -1,6 +1,6 @@
 """Temporal ensembling: query the policy every step and average every chunk's guess for now.
 
-ACT (Zhao et al. 2023, Sec. III-B, Fig. 5) predicts a chunk of k actions at every control step
+ACT (Zhao et al. 2023, Sec. IV-A, Fig. 5) predicts a chunk of k actions at every control step
 instead of every k steps. At time t, up to k chunks (made at steps t-k+1 ... t) each hold one
 prediction for time t; the executed action is their weighted average::
 

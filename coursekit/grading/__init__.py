@@ -4,6 +4,8 @@
 - :mod:`coursekit.grading.build` — writes ``exercises/`` (stubs) and ``solutions/`` from the marked code.
 - :func:`load_exercise` — the student's module (``exercises/`` or, with
   ``COURSEKIT_EXERCISES=solutions``, ``solutions/``).
+- :func:`exercise_or_reference` (:mod:`coursekit.grading.fallback`) — what a notebook uses: the
+  student's objects where written, the library's reference (with a banner) where still a stub.
 - ``coursekit.check(id)`` (:mod:`coursekit.grading.check`) — runs one exercise's tests in a
   subprocess and prints a table (notebooks).
 - :mod:`coursekit.grading.grade` — grades a folder of submissions (``coursekit grade``).
@@ -20,6 +22,7 @@ _LAZY = {
     "Exercise": "coursekit.grading.registry:Exercise",
     "get_exercise": "coursekit.grading.registry:get_exercise",
     "load_exercise": "coursekit.grading.loader:load_exercise",
+    "exercise_or_reference": "coursekit.grading.fallback:exercise_or_reference",
     "build_exercises": "coursekit.grading.build:build_exercises",
     "grade_submissions": "coursekit.grading.grade:grade_submissions",
 }

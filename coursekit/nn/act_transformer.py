@@ -1,6 +1,6 @@
 """ACT's transformer: DETR-style post-norm encoder and decoder stacks, readable layer by layer.
 
-ACT (Zhao et al. 2023, Sec. IV-A and its ``detr/`` code) builds on DETR (Carion et al. 2020):
+ACT (Zhao et al. 2023, Sec. IV-C and its ``detr/`` code) builds on DETR (Carion et al. 2020):
 
 - Post-norm layers (``normalize_before=False``): x = LayerNorm(x + Sublayer(x)).
 - Positions are NOT added to the input once; they are added to the queries and keys of every

@@ -1,6 +1,6 @@
 """The KL term of ACT's CVAE loss: a diagonal Gaussian posterior against the N(0, I) prior.
 
-ACT (Zhao et al. 2023, Sec. IV-A, Eq. 1) trains its style variable z like a beta-VAE: the
+ACT (Zhao et al. 2023, Sec. IV-B, Eq. 1) trains its style variable z like a beta-VAE: the
 encoder outputs q(z | a_{t:t+k}, o_t) = N(mu, diag(sigma^2)) and the loss adds
 
     beta * KL( N(mu, diag sigma^2) || N(0, I) )

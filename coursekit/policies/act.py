@@ -1,6 +1,6 @@
 """ACT: Action Chunking with Transformers (Zhao et al., RSS 2023), a CVAE over action chunks.
 
-Training (Sec. IV-A, Fig. 4)::
+Training (Sec. IV-B and IV-C, Fig. 4)::
 
     CVAE encoder (training only)                        decoder side (training and deployment)
     tokens [CLS, proj(o_t), proj(a_t) .. proj(a_t+k-1)]    encoder tokens [proj(z), proj(o_t), image tokens]
