@@ -46,6 +46,10 @@ def test_strategy_checks(dp):
     act_like = type("P", (), {"policy_type": "act"})()
     with pytest.raises(ValueError, match="diffusion or flow"):
         check_strategy("rtc", act_like)
+    with pytest.raises(ValueError, match="delay"):
+        evaluate_delayed(dp, "pusht", "async", -1, [100000])
+    with pytest.raises(ValueError, match="sampling option"):
+        evaluate_delayed(dp, "pusht", "async", 1, [100000], sampling={"temperature": 2.0})
 
 
 @pytest.mark.parametrize("strategy", ["sync", "rtc"])

@@ -59,7 +59,10 @@ def evaluate_delayed(policy: Any, task: str, strategy: str, delay: int, seeds: S
     from coursekit.policies.inpainting import predict_inpainted
 
     check_strategy(strategy, policy)
+    if isinstance(delay, bool) or not isinstance(delay, (int, np.integer)) or delay < 0:
+        raise ValueError(f"delay (d) must be an integer >= 0 control steps, got {delay!r}")
     sampling = dict(sampling or {})
+    policy.check_sampling(sampling)
     seeds = [int(s) for s in seeds]
     check_seeds_disjoint(seeds, dataset_meta)
     adapter = _adapter(policy, task)
