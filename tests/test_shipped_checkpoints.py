@@ -25,6 +25,7 @@ RESULTS = json.loads((ROOT / "benchmarks" / "results.json").read_text())
 CASES = [
     ("pusht_diffusion_state", "Diffusion Policy/shipped checkpoint score, DDIM-10 (notebook 05)", "score", 1.0, 0.05),
     ("pusht_regression_state", "Diffusion Policy/shipped regression checkpoint score (notebook 05)", "score", 1.0, 0.05),
+    ("pusht_flow_state", "Flow matching/shipped flow checkpoint score, Euler-10 (notebook 10)", "score", 1.0, 0.05),
     ("act_transfer_cube", "ACT/ACT transfer cube strict success, shipped checkpoint, temporal ensembling m=0.01",
      "strict_success_rate", 100.0, 6.0),
     ("act_insertion", "ACT/ACT insertion strict success, shipped checkpoint, temporal ensembling m=0.01",

@@ -24,8 +24,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--episodes", type=int, default=50, help="held-out episodes (default 50)")
     parser.add_argument("--seed-start", type=int, default=None, help="first reset seed (default 100000; episode i uses start + i)")
     parser.add_argument("--max-steps", type=int, default=None, help="steps per episode (default 300 PushT, 400 ALOHA)")
-    parser.add_argument("--sampler", choices=["ddim", "ddpm"], default=None, help="diffusion sampler (default: the checkpoint's)")
-    parser.add_argument("--steps", type=int, default=None, help="denoising steps (default: 10 for DDIM, 100 for DDPM)")
+    parser.add_argument("--sampler", choices=["ddim", "ddpm", "euler", "midpoint"], default=None,
+                        help="sampler (default: the checkpoint's): ddim/ddpm for diffusion, euler/midpoint for flow")
+    parser.add_argument("--steps", type=int, default=None,
+                        help="denoising / integration steps (default: 10 for DDIM and flow, 100 for DDPM)")
     parser.add_argument("--ddim-spacing", choices=["leading", "trailing"], default=None,
                         help="DDIM timesteps: leading (90, 80, ..., 0) or trailing (99, 89, ..., 9) (default: the checkpoint's)")
     parser.add_argument("--n-action-steps", type=int, default=None, help="override Ta, actions executed per chunk")

@@ -34,7 +34,7 @@ HELP = "train a chunk policy (diffusion, regression baseline or act) on PushT or
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--policy", choices=sorted(POLICY_TYPES), default="diffusion",
-                        help="policy head (default: diffusion; act = ACT, the transformer CVAE)")
+                        help="policy head (default: diffusion; act = ACT, the transformer CVAE; flow = flow matching, chapter 10)")
     parser.add_argument("--data", type=Path, required=True, help="demonstrations .npz (from `coursekit collect ...`)")
     parser.add_argument("--out", type=Path, required=True,
                         help="run folder to create: checkpoint (model.safetensors + config.json), metrics.csv, loss.png")

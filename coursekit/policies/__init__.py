@@ -1,4 +1,4 @@
-"""Chunk policies: Diffusion Policy, the regression baseline, ACT; the type registry and ``make_policy``.
+"""Chunk policies: Diffusion Policy, the regression baseline, ACT, flow matching; the type registry and ``make_policy``.
 
 Every policy follows the contract in :mod:`coursekit.policies.base`. ``POLICY_TYPES`` maps the
 ``policy_type`` stored in a checkpoint to its class (as a "module:Class" string, imported on
@@ -21,6 +21,7 @@ POLICY_TYPES: dict[str, str] = {
     "diffusion": "coursekit.policies.diffusion:DiffusionPolicy",
     "regression": "coursekit.policies.regression:RegressionPolicy",
     "act": "coursekit.policies.act:ACTPolicy",
+    "flow": "coursekit.policies.flow:FlowMatchingPolicy",
 }
 """policy_type -> "module:Class": THE place where a policy type is registered."""
 
@@ -32,6 +33,8 @@ _LAZY = {
     "RegressionPolicyConfig": "coursekit.policies.regression",
     "ACTPolicy": "coursekit.policies.act",
     "ACTConfig": "coursekit.policies.act",
+    "FlowMatchingPolicy": "coursekit.policies.flow",
+    "FlowMatchingPolicyConfig": "coursekit.policies.flow",
     "make_policy": "coursekit.policies.factory",
     "PolicySetup": "coursekit.policies.factory",
 }
