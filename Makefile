@@ -7,7 +7,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: setup demo lab test test-fast exercises bench clean browser
+.PHONY: setup demo lab test test-fast exercises bench clean browser sandbox
 
 # The notebooks' kernel, installed inside .venv (never over the user's own "python3" kernelspec).
 KERNEL := coursekit
@@ -51,8 +51,17 @@ browser:
 	  else echo "WARNING: chromium missing and not root; browser tests will be skipped"; fi; \
 	fi
 
+## Debian's bubblewrap, the grader's OS sandbox (only when missing and we are root).
+sandbox:
+	@if ! command -v bwrap >/dev/null 2>&1; then \
+	  if [ "$$(id -u)" = "0" ]; then \
+	    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq bubblewrap >/dev/null) \
+	      || echo "WARNING: could not install bubblewrap; grading will run without OS isolation"; \
+	  else echo "WARNING: bwrap missing and not root; grading will run without OS isolation"; fi; \
+	fi
+
 ## The whole suite: library, exercises (both implementations), grader, notebooks, browser.
-test: setup browser
+test: setup browser sandbox
 	COURSEKIT_FAST=1 COURSEKIT_EXERCISES=solutions $(PY) -m pytest -q --durations=15
 
 ## Everything but notebooks and slow tests.

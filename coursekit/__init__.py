@@ -35,6 +35,7 @@ _LAZY = {
     "checkpoint": "coursekit.checkpoint:",
     "train": "coursekit.train:",
     "evaluate": "coursekit.evaluate:",
+    "teleop": "coursekit.teleop:",
     "check": "coursekit.grading.check:check",
 }
 

@@ -10,14 +10,22 @@ Layout::
                            "normalizers": {name: {"kind": "minmax", "state": {"low": [...], ...}}},
                            "dataset": {...dataset meta...}, "training": {...training summary...},
                            "weights": {"file": "model.safetensors", "sha256": "...", "n_tensors": N,
-                                       "n_parameters": P}, "coursekit_version": "..."}
+                                       "n_parameters": P, "config_sha256": "..."}, "coursekit_version": "..."}
 
-Writing is atomic at the directory level: both files go into a hidden temporary directory beside
-CKPT, which then replaces CKPT with renames, so a reader sees the old checkpoint or the new one.
-Other files in CKPT (a training run's metrics.csv and loss.png) are carried over, never deleted.
+``weights.config_sha256`` binds the weights to the policy_type, config and normalisers they were
+trained with (the SHA-256 of their canonical JSON): editing any of them in config.json, e.g. a
+changed horizon that would still fit the tensors' shapes, is refused. The weights file itself is
+byte-identical for identical tensors (safetensors header with sorted metadata), so the recorded
+sha256 is reproducible.
+
+Writing is atomic at the directory level: both files go into a hidden staging directory beside
+CKPT, which is then exchanged with CKPT in one step (``coursekit.outputs.replace_dir``), so a
+reader, or a process killed at any moment, sees the old checkpoint or the new one. Other files in
+CKPT (a training run's metrics.csv and loss.png) are carried over, never deleted.
 Loading rebuilds the policy from its registered class and config (``coursekit.policies``), checks
 the weights' SHA-256 against config.json, then every tensor name and shape against the freshly
-built policy, and refuses anything else with a :class:`CheckpointError` (a ValueError) that says
+built policy, and refuses anything else (a config field missing, unknown or of the wrong type, a
+weights file outside the checkpoint directory) with a :class:`CheckpointError` (a ValueError) that says
 what is wrong. ``torch.load`` is never used.
 """
 
@@ -27,9 +35,10 @@ import hashlib
 import json
 import os
 import shutil
-import tempfile
 from pathlib import Path
 from typing import Any
+
+from coursekit.outputs import clean_leftovers, replace_dir, staging_dir
 
 FORMAT = "coursekit-checkpoint"
 FORMAT_VERSION = 1
@@ -49,6 +58,32 @@ def _sha256(path: Path) -> str:
     return h.hexdigest()
 
 
+def _config_digest(info: dict[str, Any]) -> str:
+    """SHA-256 of the canonical JSON of what rebuilds the policy: policy_type, config, normalizers."""
+    bound = {k: info[k] for k in ("policy_type", "config", "normalizers")}
+    return hashlib.sha256(json.dumps(bound, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+
+
+def _write_safetensors(tensors: dict[str, Any], path: Path, metadata: dict[str, str]) -> None:
+    """safetensors bytes with the metadata in sorted order: identical tensors -> identical file.
+
+    ``safetensors.torch.save`` orders the tensors deterministically but writes ``__metadata__``
+    in a hash map's order, which changes from process to process; the header is re-written here
+    with sorted keys (the data offsets are relative to the data section, so they stay valid).
+    """
+    from safetensors.torch import save
+
+    raw = save(tensors)
+    n = int.from_bytes(raw[:8], "little")
+    header = json.loads(raw[8:8 + n])
+    header = {"__metadata__": dict(sorted(metadata.items())), **header}
+    text = json.dumps(header, separators=(",", ":")).encode()
+    text += b" " * (-len(text) % 8)  # the data section stays 8-byte aligned
+    with open(path, "wb") as fh:
+        fh.write(len(text).to_bytes(8, "little") + text)
+        fh.write(raw[8 + n:])
+
+
 def save_checkpoint(policy: Any, path: str | os.PathLike, *, dataset_meta: dict[str, Any] | None = None,
                     training: dict[str, Any] | None = None, half: bool = False) -> Path:
     """Write ``policy`` (a ChunkPolicy) to the directory ``path`` atomically; returns the path.
@@ -58,8 +93,6 @@ def save_checkpoint(policy: Any, path: str | os.PathLike, *, dataset_meta: dict[
     tensors as float16 (half the size, for checkpoints shipped in the repository); loading casts
     them back to the policy's float32 parameters.
     """
-    from safetensors.torch import save_file
-
     import coursekit
     from coursekit.config import config_to_dict
     from coursekit.policies.base import normalizers_to_json
@@ -71,10 +104,11 @@ def save_checkpoint(policy: Any, path: str | os.PathLike, *, dataset_meta: dict[
     tensors = {k: v.detach().to("cpu").contiguous().clone() for k, v in policy.state_dict().items()}
     if half:
         tensors = {k: v.half() if v.is_floating_point() else v for k, v in tensors.items()}
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
-    try:
+    check_replaceable(path)
+    clean_leftovers(path)  # temporaries of a killed earlier write to this place
+    with staging_dir(path) as tmp:
         weights = tmp / WEIGHTS_FILE
-        save_file(tensors, str(weights), metadata={"format": FORMAT, "policy_type": policy.policy_type})
+        _write_safetensors(tensors, weights, {"format": FORMAT, "policy_type": policy.policy_type})
         info = {
             "format": FORMAT,
             "format_version": FORMAT_VERSION,
@@ -88,6 +122,7 @@ def save_checkpoint(policy: Any, path: str | os.PathLike, *, dataset_meta: dict[
                         "n_parameters": int(sum(p.numel() for p in policy.parameters()))},
             "coursekit_version": coursekit.__version__,
         }
+        info["weights"]["config_sha256"] = _config_digest(info)
         (tmp / CONFIG_FILE).write_text(json.dumps(info, indent=1, sort_keys=True) + "\n")
         umask = os.umask(0)
         os.umask(umask)
@@ -96,19 +131,36 @@ def save_checkpoint(policy: Any, path: str | os.PathLike, *, dataset_meta: dict[
                 os.fsync(fh.fileno())
             os.chmod(f, 0o666 & ~umask)  # ordinary file modes, not mkdtemp's private 0600/0700
         os.chmod(tmp, 0o777 & ~umask)
-        _keep_foreign_files(path, tmp)
-        # Swap directories: old -> aside, new -> path, then delete the old one.
-        old = None
-        if path.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".old", dir=path.parent))
-            os.replace(path, old / "ckpt")
-        os.replace(tmp, path)
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp, ignore_errors=True)
+        _keep_foreign_files(path, tmp)  # a run's metrics.csv, loss.png, ... are carried over, never deleted
+        replace_dir(tmp, path)  # atomic: path is the old checkpoint or the new one, never neither
     return path
+
+
+def is_checkpoint_dir(path: str | os.PathLike) -> bool:
+    """True if ``path`` is a directory holding a readable coursekit checkpoint (config.json of the format)."""
+    try:
+        read_checkpoint_info(path)
+    except (ValueError, OSError):
+        return False
+    return True
+
+
+def check_replaceable(path: str | os.PathLike) -> None:
+    """Refuse (ValueError) to write a checkpoint where it would replace something that is not one.
+
+    ``path`` may be new, or a directory; other files in it are carried over by the save, but a
+    ``config.json`` or ``model.safetensors`` already there must belong to a coursekit checkpoint
+    (a user's own files of those names are never replaced).
+    """
+    path = Path(path)
+    if not path.exists() and not path.is_symlink():
+        return
+    if path.is_symlink() or not path.is_dir():
+        raise ValueError(f"{str(path)!r} exists and is not a directory; a checkpoint is a directory: choose another path")
+    taken = [n for n in (CONFIG_FILE, WEIGHTS_FILE) if (path / n).exists() or (path / n).is_symlink()]
+    if taken and not is_checkpoint_dir(path):
+        raise ValueError(f"{str(path)!r} holds {' and '.join(taken)} that are not a coursekit checkpoint's; "
+                         f"refusing to replace them: choose another path")
 
 
 def _keep_foreign_files(path: Path, tmp: Path) -> None:
@@ -221,13 +273,22 @@ def load_checkpoint(path: str | os.PathLike, device: Any = "auto", expected_type
         normalizers = normalizers_from_json(info["normalizers"])
     except (ValueError, TypeError) as exc:
         raise CheckpointError(f"checkpoint {str(path)!r} has a config that does not fit {cls.__name__}: {exc}") from exc
-    weights = path / info["weights"].get("file", WEIGHTS_FILE)
-    if not weights.is_file():
-        raise FileNotFoundError(f"checkpoint {str(path)!r} has no weights file {weights.name}")
+    entry = info["weights"]
+    name = entry.get("file", WEIGHTS_FILE) if isinstance(entry, dict) else None
+    if not isinstance(name, str) or Path(name).name != name or name in ("", ".", ".."):
+        raise CheckpointError(f"checkpoint {str(path)!r}: weights.file must name a file inside the checkpoint "
+                              f"directory (like {WEIGHTS_FILE!r}), got {name!r}")
+    bound = entry.get("config_sha256")
+    if bound is not None and bound != _config_digest(info):
+        raise CheckpointError(f"checkpoint {str(path)!r}: config.json's policy_type/config/normalizers differ from those "
+                              f"the weights were saved with (config_sha256 mismatch): edited or from another checkpoint")
+    weights = path / name
+    if weights.is_symlink() or not weights.is_file():
+        raise FileNotFoundError(f"checkpoint {str(path)!r} has no weights file {name!r} (a regular file, not a link)")
     digest = _sha256(weights)
-    if digest != info["weights"].get("sha256"):
+    if digest != entry.get("sha256"):
         raise CheckpointError(f"{str(weights)!r} does not match config.json (sha256 {digest[:12]}... vs "
-                              f"{str(info['weights'].get('sha256'))[:12]}...): truncated, corrupt or from another checkpoint")
+                              f"{str(entry.get('sha256'))[:12]}...): truncated, corrupt or from another checkpoint")
     try:
         tensors = load_file(str(weights))
     except (SafetensorError, OSError, ValueError) as exc:

@@ -3,6 +3,10 @@
 Each command module exposes ``HELP`` (one line), ``add_arguments(parser)`` and
 ``run(args) -> int``, and imports heavy libraries (torch, mujoco, meshcat) only inside ``run``,
 so ``coursekit --help`` is instant.
+
+One error path: a bad flag (argparse) and any failure inside a command print ONE line,
+``coursekit CMD: error: <what, and which value>``, and exit with status 2 (130 on Ctrl-C).
+``--debug`` (anywhere on the command line) shows the full traceback instead.
 """
 
 from __future__ import annotations
@@ -10,6 +14,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+from typing import NoReturn
 
 # sub-command -> module under coursekit.commands
 COMMANDS: dict[str, str] = {
@@ -27,8 +32,20 @@ def _load(name: str):
     return importlib.import_module(f"coursekit.commands.{COMMANDS[name]}")
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with a one-line error: ``coursekit CMD: error: ...`` (no usage block), exit status 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {_one_line(message)} (see `{self.prog} --help`)\n")
+
+
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="coursekit", description="Action-chunk policies (Diffusion Policy, ACT) on a laptop CPU.")
+    parser = _Parser(prog="coursekit", description="Action-chunk policies (Diffusion Policy, ACT) on a laptop CPU.")
+    parser.add_argument("--debug", action="store_true", help="on an error, show the full traceback")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
         if only is not None and name != only:
@@ -41,22 +58,39 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
             continue
         p = sub.add_parser(name, help=module.HELP, description=module.HELP)
         module.add_arguments(p)
-        p.set_defaults(_run=module.run)
+        p.add_argument("--debug", action="store_true", help="on an error, show the full traceback")
+        p.set_defaults(_run=module.run, _parser=p)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in argv  # accepted before or after the command name
+    argv = [a for a in argv if a != "--debug"]
     only = argv[0] if argv and argv[0] in COMMANDS else None
     parser = build_parser(only)
-    args = parser.parse_args(argv)
+    try:
+        args, unknown = parser.parse_known_args(argv)
+        if unknown:  # reported by the command's own parser: "coursekit train: error: ..."
+            getattr(args, "_parser", parser).error(f"unrecognized arguments: {' '.join(unknown)}")
+    except SystemExit as exc:  # argparse already printed its one-line error (status 2) or --help (0)
+        return int(exc.code or 0)
     if not getattr(args, "_run", None):
         parser.print_help()
         return 0 if not argv else 2
+    if debug:
+        return int(args._run(args) or 0)
     try:
         return int(args._run(args) or 0)
-    except (ValueError, FileNotFoundError) as exc:  # bad input: a clear message, not a traceback
-        print(f"coursekit {args.command}: error: {exc}", file=sys.stderr)
+    except KeyboardInterrupt:
+        print(f"coursekit {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except (ValueError, OSError) as exc:  # bad input, a missing or unwritable file: the message says it all
+        print(f"coursekit {args.command}: error: {_one_line(exc)}", file=sys.stderr)
+        return 2
+    except Exception as exc:  # anything else is a bug or an environment problem: still one line
+        print(f"coursekit {args.command}: error: {type(exc).__name__}: {_one_line(exc)} "
+              f"(run again with --debug for the traceback)", file=sys.stderr)
         return 2
 
 

@@ -81,8 +81,13 @@ def test_half_precision_storage_loads_into_float32(saved, tmp_path):
 
 
 def _edit_config(path, fn):
+    """Edit config.json as a deliberate, consistent edit would (re-binding the config digest)."""
+    from coursekit.checkpoint import _config_digest
+
     info = json.loads((path / "config.json").read_text())
     fn(info)
+    if {"policy_type", "config", "normalizers"} <= set(info) and isinstance(info.get("weights"), dict):
+        info["weights"]["config_sha256"] = _config_digest(info)
     (path / "config.json").write_text(json.dumps(info))
 
 
@@ -109,7 +114,7 @@ def test_never_unpickles(saved):
 def test_refuses_shape_mismatch(saved):
     _, path = saved
     _edit_config(path, lambda i: i["config"]["unet"].update(down_dims=[16, 64]))
-    with pytest.raises(CheckpointError, match="shape"):
+    with pytest.raises(CheckpointError, match="has shape"):
         load_checkpoint(path, device="cpu")
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 import coursekit
 from coursekit.cli import main
 from coursekit.grading.paths import repo_root
@@ -49,9 +51,9 @@ def test_grade_cli_rejects_bad_input(tmp_path, capsys):
     assert main(["grade", str(tmp_path / "nope"), "--out", str(tmp_path / "out")]) == 2
     assert "does not exist" in capsys.readouterr().err
     assert main(["grade", str(tmp_path), "--out", str(tmp_path / "out"), "--jobs", "0"]) == 2
-    assert "jobs must be at least 1, got 0" in capsys.readouterr().err
+    assert "argument --jobs: must be an integer >= 1, got '0'" in capsys.readouterr().err
     assert main(["grade", str(tmp_path), "--out", str(tmp_path / "out"), "--timeout", "-1"]) == 2
-    assert "timeouts must be positive" in capsys.readouterr().err
+    assert "argument --timeout: must be a finite number > 0, got '-1'" in capsys.readouterr().err
     assert main(["grade", str(tmp_path), "--out", str(tmp_path / "out"), "--exercise", "nope"]) == 2
     assert "unknown exercise 'nope'" in capsys.readouterr().err
 
@@ -77,21 +79,62 @@ def test_zip_members_are_flattened_and_size_capped(tmp_path):
     assert not (tmp_path / "outside").exists()
 
 
-def test_partial_credit_for_parametrized_tests_and_zero_when_tampered():
+def test_partial_credit_hints_by_failure_kind_and_hidden_tests():
     from coursekit.grading.runner import Outcome, RunResult, score_exercise
+    from coursekit.grading.scoring import LEADS, exercise_status
 
     exercise = get_exercise("chunk_windows")
     file = "test_chunk_windows.py"
     outcomes = [Outcome(f"{file}::{name}", "passed") for name in exercise.tests
-                if name != "test_matches_library_on_random_datasets"]
-    outcomes += [Outcome(f"{file}::test_matches_library_on_random_datasets[{i}]", o, "boom" if o == "failed" else "")
+                if name not in ("test_matches_library_on_random_datasets", "test_edge_padding", "test_window_count")]
+    outcomes += [Outcome(f"{file}::test_matches_library_on_random_datasets[{i}]", o, "boom" if o == "failed" else "",
+                         kind="value" if o == "failed" else "")
                  for i, o in enumerate(["passed", "failed", "passed", "not run"])]
-    scores = {s.name: s for s in score_exercise(exercise, RunResult(outcomes=outcomes))}
+    outcomes.append(Outcome(f"{file}::test_edge_padding", "failed", "ValueError: nope", kind="error", cause="error"))
+    outcomes.append(Outcome(f"{file}::test_window_count", "failed", "Timeout (>1s)", kind="timeout", cause="timeout"))
+    outcomes.append(Outcome("hidden_x.py::test_secret", "failed", "secret message", "secret traceback", kind="value"))
+    run = RunResult(outcomes=outcomes)
+    scores = {s.name: s for s in score_exercise(exercise, run, {"hidden_x.py": {"test_secret": 2.0}})}
     random = scores["test_matches_library_on_random_datasets"]
     assert random.points == exercise.tests[random.name][0] * 2 / 4 and not random.passed
     assert random.message == "2/4 cases failed; first: boom"
-    assert sum(s.points for s in scores.values()) == exercise.max_points - exercise.tests[random.name][0] / 2
-    tampered = score_exercise(exercise, RunResult(outcomes=outcomes, status="tampered", reason="tampering detected"))
-    assert all(s.points == 0 and not s.passed and s.message == "tampering detected" for s in tampered)
-    missing = score_exercise(exercise, RunResult(status="missing", reason="chunk_windows.py was not found"))
-    assert all(s.points == 0 and "not found" in s.message for s in missing)
+    assert random.hint == exercise.tests[random.name][1]  # a wrong value: the maths hint alone
+    assert scores["test_edge_padding"].hint.startswith(LEADS["error"])  # raised: fix that first
+    assert scores["test_edge_padding"].hint.endswith(exercise.tests["test_edge_padding"][1])
+    assert scores["test_window_count"].hint.startswith(LEADS["timeout"])
+    secret = scores["test_secret"]
+    assert secret.hidden and secret.max_points == 2 and secret.points == 0
+    assert secret.hint == secret.message == secret.detail == "", "a hidden test shows name, points and pass/fail only"
+    assert exercise_status(exercise, outcomes) == "timeout"
+
+
+def test_one_wrong_function_fails_only_its_own_tests(tmp_path):
+    """Issue 18: the epsilon_loss tests use the REFERENCE q_sample, so a wrong q_sample does not cascade."""
+    source = (repo_root() / "solutions" / "noise_loss.py").read_text()
+    broken = source.replace("def q_sample(", "def q_sample(*args, **kwargs):\n    raise ValueError('broken q_sample')\n\n\ndef _unused(", 1)
+    assert broken != source
+    (tmp_path / "noise_loss.py").write_text(broken)
+    result = coursekit.check("noise_loss", tmp_path, show=False)
+    by_name = {s.name: s for s in result.scores}
+    assert all(not s.passed and "broken q_sample" in s.message for n, s in by_name.items() if n.startswith("test_q_sample")), \
+        [(n, s.message) for n, s in by_name.items()]
+    assert all(s.passed for n, s in by_name.items() if n.startswith("test_epsilon_loss")), \
+        [(n, s.message) for n, s in by_name.items() if not s.passed]
+
+
+def test_without_bwrap_grading_says_so_once(tmp_path, monkeypatch, capsys):
+    import shutil
+
+    from coursekit.grading import sandbox
+    from coursekit.grading.grade import grade_submissions
+
+    for name in ("ann", "ben"):
+        (tmp_path / "subs" / name).mkdir(parents=True)
+        shutil.copy(repo_root() / "solutions" / "chunk_windows.py", tmp_path / "subs" / name)
+    monkeypatch.setenv(sandbox.MODE_ENV, "none")
+    summary = grade_submissions(tmp_path / "subs", tmp_path / "out", ["chunk_windows"], jobs=2, progress=False)
+    assert summary.mode == "none" and all(s.points == 10 for s in summary.students)
+    assert capsys.readouterr().out.count(sandbox.NOT_ISOLATED) == 1
+    monkeypatch.setenv(sandbox.MODE_ENV, "sometimes")
+    with pytest.raises(ValueError, match="COURSEKIT_SANDBOX must be auto, bwrap or none, got 'sometimes'"):
+        sandbox.mode()

@@ -35,7 +35,7 @@ def test_registry_matches_test_file_and_source(exercise):
     module = importlib.import_module(exercise.source)
     for obj in exercise.objects:
         assert hasattr(module, obj), f"{exercise.source} has no {obj}"
-    assert exercise.max_points == sum(p for p, _ in exercise.tests.values()) > 0
+    assert exercise.max_points == sum(spec[0] for spec in exercise.tests.values()) > 0
 
 
 def test_ids_unique_numbering_and_lookup():

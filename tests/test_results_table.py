@@ -27,6 +27,10 @@ def test_every_row_has_the_schema():
             assert lo <= entry["value"] <= hi, f"{key}: interval {entry['interval']} misses {entry['value']}"
         if "n" in entry:
             assert isinstance(entry["n"], int) and entry["n"] > 0, key
+        if entry["section"].startswith(("Claims", "Chunk ablation")):  # issue 16: every claim with its evidence
+            assert {"interval", "n", "seeds"} <= set(entry), f"{key}: a claims row needs interval, n and seeds"
+            learned = "clean expert" not in entry["note"]  # the expert's own statistics have no training seed
+            assert not learned or "training seed" in entry["note"], f"{key}: say how many training seeds are behind it"
 
 
 def test_readme_table_is_rendered_from_results_json():
@@ -43,3 +47,37 @@ def test_record_refuses_an_interval_that_misses_the_value(tmp_path, monkeypatch)
     results.record("S", "x", 0.15, "", "cmd", interval=(0.1, 0.2), n=200, seeds="100000-100199")
     row = json.loads((tmp_path / "r.json").read_text())["S/x"]
     assert row["interval"] == [0.1, 0.2] and row["n"] == 200 and row["seeds"] == "100000-100199"
+
+
+def _numbers(text):
+    return [m.group(0) for m in re.finditer(r"(?<![\w.\-])\d+(?:\.\d+)?(?![\w.])", text)]
+
+
+def _matches(quoted, values):
+    decimals = len(quoted.split(".")[1]) if "." in quoted else 0
+    q = float(quoted)
+    return any(round(v, decimals) == q or round(100 * v, decimals) == q for v in values)
+
+
+def test_readme_claims_cite_rows_that_hold_their_numbers():
+    """Every number in the README's claims block is in a results row that its bullet names."""
+    text = results.README.read_text()
+    assert "<!-- claims:start -->" in text and "<!-- claims:end -->" in text
+    block = text.split("<!-- claims:start -->", 1)[1].split("<!-- claims:end -->", 1)[0]
+    table = json.loads(results.RESULTS.read_text())
+    bullets = [b.split("\n\n", 1)[0] for b in re.split(r"\n- ", block)[1:]]  # a bullet ends at a blank line
+    assert len(bullets) >= 3, "the claims block has no bullets"
+    for bullet in bullets:
+        cited = re.findall(r"\[([^\]]+/[^\]]+)\]", bullet)  # [section/name] of each row it rests on
+        assert cited, f"bullet cites no row: {bullet[:80]!r}"
+        values = []
+        for key in cited:
+            assert key in table, f"cited row {key!r} is not in results.json"
+            row = table[key]
+            values += [float(row["value"])] if isinstance(row["value"], (int, float)) else []
+            values += list(row.get("interval", [])) + ([row["n"]] if "n" in row else [])
+            words = " ".join([row["name"], row["note"], row.get("seeds", "")]).replace("-", " ").replace("=", " ")
+            values += [float(x) for x in _numbers(words)]
+        prose = re.sub(r"\[[^\]]+/[^\]]+\]", "", bullet)
+        for quoted in _numbers(prose):
+            assert _matches(quoted, values), f"{quoted} in {bullet[:60]!r}... is in none of its rows {cited}"

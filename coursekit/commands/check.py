@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from coursekit.commands._args import positive_float
+
 HELP = "run one exercise's graded tests on your exercises/ module and print test, points, pass/FAIL, hint"
 
 
@@ -12,7 +14,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("exercise", help="exercise id, e.g. chunk_windows (`coursekit exercises list` shows them)")
     parser.add_argument("--dir", type=Path, default=None,
                         help="folder with the module (default: exercises/, or solutions/ with COURSEKIT_EXERCISES=solutions)")
-    parser.add_argument("--timeout", type=float, default=120.0, help="wall-clock limit for the test run, in seconds")
+    parser.add_argument("--timeout", type=positive_float, default=120.0, help="wall-clock limit for the test run, in seconds")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -1,8 +1,8 @@
 """``coursekit demo``: the end-to-end tour (what ``make demo`` runs), a few minutes on a laptop CPU.
 
 1. generate a handful of PushT demonstrations with the scripted expert and save them;
-2. replay one of them in a fresh environment (same actions, same trajectory: the physics is
-   deterministic) and check that it ends in success;
+2. replay one of them in a fresh environment (same reset seed, same actions: the same states bit
+   for bit, the physics is deterministic) and check that it ends in success;
 3. write the replay as a 3-D meshcat animation (one self-contained HTML file) and a matplotlib
    figure (the replayed pusher path; every demonstration's coverage over time) under ``--out``;
 4. print where everything is and how to open the course.
@@ -14,19 +14,26 @@ import argparse
 import time
 from pathlib import Path
 
+from coursekit.commands._args import MAX_SEED, int_in, nonnegative_int, seed_int
+
 HELP = "the end-to-end tour: PushT demonstrations, a replay, a meshcat HTML animation and a figure"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--episodes", type=int, default=6, help="number of scripted demonstrations (default 6)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the first demonstration (episode i uses seed + i)")
+    parser.add_argument("--episodes", type=int_in(1, 1000), default=6, help="number of scripted demonstrations (default 6)")
+    parser.add_argument("--seed", type=seed_int, default=0, help="seed of the first demonstration (episode i uses seed + i)")
     parser.add_argument("--out", type=Path, default=Path("outputs"), help="output folder (default outputs/)")
-    parser.add_argument("--replay", type=int, default=0, help="which demonstration to replay and animate (default 0)")
+    parser.add_argument("--replay", type=nonnegative_int, default=0, help="which demonstration to replay and animate (default 0)")
     parser.add_argument("--no-progress", action="store_true", help="hide progress bars")
 
 
-def replay_episode(states, actions):
-    """Replay ``actions`` (T, 2) in a fresh PushTEnv from ``states[0]``.
+def replay_episode(states, actions, seed: int | None = None):
+    """Replay ``actions`` (T, 2) in a fresh PushTEnv.
+
+    With the episode's reset ``seed`` the env is reset exactly as when it was recorded and the
+    replay reproduces every state bit for bit. Without one, the T is placed at ``states[0]``
+    with ``set_state``, which is close but not exact: the reset's physics substep can leave
+    hidden solver state (see ``PushTEnv.set_state``), and pushing is chaotic.
 
     Returns (replayed states (T, 7) [ax, ay, bx, by, angle, vx, vy], coverage (T,) after each
     action, largest |position difference| (px) to the recorded states (T, 5)).
@@ -36,10 +43,13 @@ def replay_episode(states, actions):
     from coursekit.envs.pusht import PushTEnv
 
     env = PushTEnv()
-    env.reset()
-    # set_state puts the T exactly at the recorded pose (angle set before position); the
-    # reset option "reset_to_state" would apply the reference's LEGACY order and shift the T.
-    env.set_state(np.asarray(states[0][:5], dtype=np.float64))
+    if seed is not None:
+        env.reset(seed=int(seed))
+    else:
+        env.reset()
+        # set_state puts the T exactly at the recorded pose (angle set before position); the
+        # reset option "reset_to_state" would apply the reference's LEGACY order and shift the T.
+        env.set_state(np.asarray(states[0][:5], dtype=np.float64))
     replayed, coverage = [env.get_state()], []
     for action in actions:
         _, _, _, _, info = env.step(action)  # the raw env keeps stepping after success: the rest steps
@@ -72,12 +82,36 @@ def save_figure(dataset, replay: int, path: Path) -> Path:
     return path
 
 
+def _outputs(out: Path, args: argparse.Namespace) -> tuple[Path, Path, Path]:
+    """The three files the tour writes under ``--out`` (dataset, 3-D replay page, figure)."""
+    return (out / "data" / f"demo_pusht_{args.episodes}ep_seed{args.seed}.npz", out / "demo_pusht_replay.html",
+            out / "demo_pusht.png")
+
+
+def _check_demo_outputs(out: Path, args: argparse.Namespace) -> None:
+    """Before any work: --out must be a (possibly new) folder; the tour replaces only its own three files there.
+
+    Nothing else in the folder is touched. A dataset of that name is replaced only if it is a
+    coursekit dataset; the page and the figure only if they are regular files.
+    """
+    from coursekit.data.episodes import is_dataset_file
+    from coursekit.outputs import check_output
+
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {str(out)!r} is a file; the tour writes a folder of outputs: choose another path")
+    data, page, figure = _outputs(out, args)
+    check_output(data, what="coursekit dataset", is_ours=is_dataset_file, directory=False, overwrite=True)
+    for path in (page, figure):
+        check_output(path, what="file", is_ours=lambda p: p.is_file(), directory=False, overwrite=True)
+
+
 def run(args: argparse.Namespace) -> int:
-    if not 1 <= args.episodes <= 1000:
-        raise ValueError(f"--episodes must be between 1 and 1000, got {args.episodes}")
     if not 0 <= args.replay < args.episodes:
         raise ValueError(f"--replay must index one of the {args.episodes} episodes, got {args.replay}")
+    if args.seed > MAX_SEED - (args.episodes - 1):
+        raise ValueError(f"--seed must be at most {MAX_SEED - (args.episodes - 1)} (episode i uses seed + i), got {args.seed}")
     out: Path = args.out
+    _check_demo_outputs(out, args)
     start = time.perf_counter()
 
     from coursekit.experts.pusht_planner import collect_dataset
@@ -85,14 +119,15 @@ def run(args: argparse.Namespace) -> int:
     print(f"[1/4] generating {args.episodes} PushT demonstrations with the scripted expert (seed {args.seed}) ...")
     t0 = time.perf_counter()
     dataset = collect_dataset(args.episodes, args.seed, progress=not args.no_progress)
-    data_path = dataset.save(out / "data" / f"demo_pusht_{args.episodes}ep_seed{args.seed}.npz")
+    data_path = dataset.save(_outputs(out, args)[0])
     lengths = dataset.episode_lengths
     print(f"      {dataset.n_episodes} episodes, {dataset.n_steps} steps (mean {lengths.mean():.0f} per episode) "
           f"in {time.perf_counter() - t0:.1f} s")
 
     print(f"[2/4] replaying demonstration {args.replay} in a fresh environment ...")
     episode = dataset.episode(args.replay)
-    replayed, coverage, drift = replay_episode(episode["state"], episode["action"])
+    replayed, coverage, drift = replay_episode(episode["state"], episode["action"],
+                                               seed=dataset.meta["episode_seeds"][args.replay])
     print(f"      {len(replayed)} steps, final coverage {coverage[-1]:.3f} "
           f"({'success' if coverage.max() > 0.95 else 'NOT a success'}); "
           f"largest drift from the recorded states {drift:.2e} px")
@@ -103,12 +138,12 @@ def run(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     with MeshcatScene() as scene:  # its server is killed as soon as the page is written
-        html_path = export_pusht_rollout(replayed, out / "demo_pusht_replay.html", actions=episode["action"],
+        html_path = export_pusht_rollout(replayed, _outputs(out, args)[1], actions=episode["action"],
                                          scene=scene)
     print(f"      {html_path.stat().st_size / 1e6:.2f} MB in {time.perf_counter() - t0:.1f} s")
 
     print("[4/4] drawing the demonstrations with matplotlib ...")
-    fig_path = save_figure(dataset, args.replay, out / "demo_pusht.png")
+    fig_path = save_figure(dataset, args.replay, _outputs(out, args)[2])
 
     print(f"\nDone in {time.perf_counter() - start:.0f} s. Open these:")
     print(f"  demonstrations   {data_path}")

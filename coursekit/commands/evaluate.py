@@ -16,31 +16,35 @@ import json
 from pathlib import Path
 from typing import Any
 
+from coursekit.commands._args import MAX_SEED, device, nonnegative_float, positive_int, seed_int
+
 HELP = "evaluate a policy checkpoint on held-out seeds (PushT score/success, ALOHA stages/strict success)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("checkpoint", type=Path, help="checkpoint directory (from `coursekit train`)")
-    parser.add_argument("--episodes", type=int, default=50, help="held-out episodes (default 50)")
-    parser.add_argument("--seed-start", type=int, default=None, help="first reset seed (default 100000; episode i uses start + i)")
-    parser.add_argument("--max-steps", type=int, default=None, help="steps per episode (default 300 PushT, 400 ALOHA)")
+    parser.add_argument("--episodes", type=positive_int, default=50, help="held-out episodes (default 50)")
+    parser.add_argument("--seed-start", type=seed_int, default=None, help="first reset seed (default 100000; episode i uses start + i)")
+    parser.add_argument("--max-steps", type=positive_int, default=None, help="steps per episode (default 300 PushT, 400 ALOHA)")
     parser.add_argument("--sampler", choices=["ddim", "ddpm", "euler", "midpoint"], default=None,
                         help="sampler (default: the checkpoint's): ddim/ddpm for diffusion, euler/midpoint for flow")
-    parser.add_argument("--steps", type=int, default=None,
+    parser.add_argument("--steps", type=positive_int, default=None,
                         help="denoising / integration steps (default: 10 for DDIM and flow, 100 for DDPM)")
     parser.add_argument("--ddim-spacing", choices=["leading", "trailing"], default=None,
                         help="DDIM timesteps: leading (90, 80, ..., 0) or trailing (99, 89, ..., 9) (default: the checkpoint's)")
-    parser.add_argument("--n-action-steps", type=int, default=None, help="override Ta, actions executed per chunk")
+    parser.add_argument("--n-action-steps", type=positive_int, default=None, help="override Ta, actions executed per chunk")
     parser.add_argument("--no-ensembling", action="store_true",
                         help="ACT: execute chunks by receding horizon instead of temporal ensembling")
-    parser.add_argument("--ensemble-decay", type=float, default=None, help="ACT: m in w_i = exp(-m i) (default: the checkpoint's)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the sampler noise (default 0)")
-    parser.add_argument("--device", default="auto", help="auto, cpu, cuda, mps (default auto)")
-    parser.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
-    parser.add_argument("--json", type=Path, default=None, help="also write the summary to this JSON file")
+    parser.add_argument("--ensemble-decay", type=nonnegative_float, default=None, help="ACT: m in w_i = exp(-m i) (default: the checkpoint's)")
+    parser.add_argument("--seed", type=seed_int, default=0, help="seed of the sampler noise (default 0)")
+    parser.add_argument("--device", type=device, default="auto", help="auto, cpu, cuda, mps (default auto)")
+    parser.add_argument("--threads", type=positive_int, default=None, help="torch CPU threads (default: torch's choice)")
+    parser.add_argument("--json", type=Path, default=None,
+                        help="also write the summary to this JSON file (an earlier summary there is replaced; "
+                             "any other file is refused)")
     parser.add_argument("--record", type=Path, default=None,
                         help="write a meshcat HTML replay and a PNG grid of first/last frames to this new folder")
-    parser.add_argument("--record-episodes", type=int, default=4, help="episodes to record with --record (default 4)")
+    parser.add_argument("--record-episodes", type=positive_int, default=4, help="episodes to record with --record (default 4)")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
@@ -56,15 +60,27 @@ def _overrides(args: argparse.Namespace) -> dict[str, Any]:
     return changes
 
 
-def _check_record_dir(args: argparse.Namespace) -> None:
-    """Before any evaluation: --record must name a new (or empty) folder."""
-    if args.record is None:
-        return
-    if args.record_episodes < 1:
-        raise ValueError(f"--record-episodes must be >= 1, got {args.record_episodes}")
-    if args.record.exists() and (not args.record.is_dir() or any(args.record.iterdir())):
-        raise ValueError(f"--record {str(args.record)!r} exists and is not an empty folder; choose a new folder "
-                         "(nothing is overwritten)")
+def is_eval_summary(path: Path) -> bool:
+    """A JSON file `coursekit eval --json` wrote (an object naming the evaluated checkpoint)."""
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return False
+    return isinstance(data, dict) and "checkpoint" in data and "episodes" in data
+
+
+def _check_outputs(args: argparse.Namespace) -> None:
+    """Before any evaluation: --json and --record are safe places, the seed range is valid."""
+    from coursekit.outputs import check_output
+
+    if args.seed_start is not None and args.seed_start + args.episodes - 1 > MAX_SEED:
+        raise ValueError(f"--seed-start {args.seed_start} + --episodes {args.episodes} runs past the largest seed {MAX_SEED}")
+    if args.json is not None:
+        check_output(args.json, what="coursekit evaluation summary", is_ours=is_eval_summary, directory=False,
+                     overwrite=True, inputs=[args.checkpoint], flag="--json")
+    if args.record is not None:  # a new or empty folder: write_replay never replaces files
+        check_output(args.record, what="new folder", is_ours=lambda p: False, directory=True,
+                     inputs=[args.checkpoint] + ([args.json] if args.json is not None else []), flag="--record")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -75,13 +91,12 @@ def run(args: argparse.Namespace) -> int:
     from coursekit.evaluate.result import EVAL_SEED_START, heldout_seeds
     from coursekit.evaluate.tasks import make_adapter, task_of
 
-    _check_record_dir(args)
+    _check_outputs(args)
     if args.threads is not None:
-        if args.threads < 1:
-            raise ValueError(f"--threads must be >= 1, got {args.threads}")
         torch.set_num_threads(args.threads)
     info = read_checkpoint_info(args.checkpoint)
     policy = load_checkpoint(args.checkpoint, device=args.device)
+    _check_flags_apply(args, policy)
     seeds = heldout_seeds(args.episodes, EVAL_SEED_START if args.seed_start is None else args.seed_start)
     changes = _overrides(args)
     if changes:
@@ -97,6 +112,29 @@ def run(args: argparse.Namespace) -> int:
     if args.record is not None:
         summary["record"] = {k: str(v) for k, v in _write_replay(args, adapter, result).items()}
     return _report(args, summary)
+
+
+# flag -> (where the policy lists what it accepts, the field it sets)
+_FLAGS = {"--sampler": ("sampling_options", "sampler"), "--steps": ("sampling_options", "num_inference_steps"),
+          "--ddim-spacing": ("eval_overrides", "ddim_timestep_spacing"),
+          "--no-ensembling": ("eval_overrides", "temporal_ensembling"),
+          "--ensemble-decay": ("eval_overrides", "ensemble_decay"), "--n-action-steps": ("eval_overrides", "n_action_steps")}
+
+
+def _check_flags_apply(args: argparse.Namespace, policy: Any) -> None:
+    """Refuse (naming flag, value and policy) a flag the loaded policy has no use for, and a bad step count."""
+    for flag, (kind, field) in _FLAGS.items():
+        value = getattr(args, flag[2:].replace("-", "_"))
+        if value not in (None, False) and field not in getattr(policy, kind, ()):
+            raise ValueError(f"{flag}{'' if value is True else f' {value}'} does not apply to {str(args.checkpoint)!r}: "
+                             f"it holds a {policy.policy_type!r} policy")
+    sampling = {k: v for k, v in (("sampler", args.sampler), ("num_inference_steps", args.steps)) if v is not None}
+    if sampling:
+        try:
+            policy.describe_sampling(**sampling)
+        except ValueError as exc:
+            given = " ".join(f"{flag} {v}" for flag, v in (("--sampler", args.sampler), ("--steps", args.steps)) if v is not None)
+            raise ValueError(f"{given}: {exc}") from None
 
 
 def _write_replay(args: argparse.Namespace, adapter: Any, result: Any) -> dict[str, Any]:

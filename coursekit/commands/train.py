@@ -21,10 +21,15 @@ Examples::
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
+import sys
 from pathlib import Path
 from typing import Any
+
+from coursekit.commands._args import (device, nonnegative_int, positive_float, positive_int, positive_int_list,
+                                      seed_int)
 
 from coursekit.data.features import FEATURES  # numpy only: `coursekit --help` stays instant
 from coursekit.policies import POLICY_TYPES  # the registry itself (no torch until a class is used)
@@ -38,35 +43,38 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--data", type=Path, required=True, help="demonstrations .npz (from `coursekit collect ...`)")
     parser.add_argument("--out", type=Path, required=True,
                         help="run folder to create: checkpoint (model.safetensors + config.json), metrics.csv, loss.png")
-    parser.add_argument("--minutes", type=float, default=None, help="wall-clock training budget in minutes")
-    parser.add_argument("--steps", type=int, default=None, help="optimiser steps (default: until --minutes is used up)")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace an existing run at --out: the new run trains in a hidden folder beside it and "
+                             "replaces the old one only when complete")
+    parser.add_argument("--minutes", type=positive_float, default=None, help="wall-clock training budget in minutes")
+    parser.add_argument("--steps", type=positive_int, default=None, help="optimiser steps (default: until --minutes is used up)")
     parser.add_argument("--features", choices=sorted(FEATURES), default=None,
                         help="observation features (default: from the data: pusht_state = agent xy, block xy, sin/cos "
                              "angle for PushT, aloha_state = qpos + object poses for the arm pair)")
-    parser.add_argument("--chunk-size", type=int, default=None, help="k, actions per ACT chunk (default: ACTConfig's)")
+    parser.add_argument("--chunk-size", type=positive_int, default=None, help="k, actions per ACT chunk (default: ACTConfig's)")
     parser.add_argument("--unet", default=None, help="U-Net size preset: cpu (default), paper_lowdim, paper_image")
-    parser.add_argument("--down-dims", default=None, help="override the preset's U-Net channels, e.g. 32,64,128")
+    parser.add_argument("--down-dims", type=positive_int_list, default=None, help="override the preset's U-Net channels, e.g. 32,64,128")
     parser.add_argument("--vision", default=None, help="image encoder preset for --features pusht_image: cpu (default), resnet18")
-    parser.add_argument("--n-action-steps", type=int, default=None,
+    parser.add_argument("--n-action-steps", type=positive_int, default=None,
                         help="Ta, actions executed per chunk (default: the policy's, 8 for diffusion/regression)")
     parser.add_argument("--recipe", choices=["paper", "cpu"], default="paper",
                         help="paper (default): the paper's optimiser (DP lr 1e-4, batch 256; ACT lr 1e-5, batch 8); "
                              "cpu: tuned for a 20-30 minute CPU budget (DP lr 5e-4, batch 128; ACT lr 3e-4, batch 16)")
-    parser.add_argument("--batch-size", type=int, default=None, help="batch size (default: the recipe's; 64 for images)")
-    parser.add_argument("--lr", type=float, default=None, help="peak learning rate (default: the recipe's)")
-    parser.add_argument("--warmup-steps", type=int, default=None, help="linear LR warm-up steps (default: the recipe's)")
+    parser.add_argument("--batch-size", type=positive_int, default=None, help="batch size (default: the recipe's; 64 for images)")
+    parser.add_argument("--lr", type=positive_float, default=None, help="peak learning rate (default: the recipe's)")
+    parser.add_argument("--warmup-steps", type=nonnegative_int, default=None, help="linear LR warm-up steps (default: the recipe's)")
     parser.add_argument("--lr-schedule", choices=["cosine", "constant"], default=None,
                         help="after warm-up: cosine decay to 0 over the budget or constant (default: the recipe's; "
                              "cosine, except ACT --recipe paper: constant)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of weights, batches and noise (default 0)")
-    parser.add_argument("--threads", type=int, default=None,
+    parser.add_argument("--seed", type=seed_int, default=0, help="seed of weights, batches and noise (default 0)")
+    parser.add_argument("--threads", type=positive_int, default=None,
                         help="torch CPU threads (default: torch's choice; use 1 on a machine shared with other jobs)")
-    parser.add_argument("--device", default="auto", help="auto, cpu, cuda, mps (default auto)")
+    parser.add_argument("--device", type=device, default="auto", help="auto, cpu, cuda, mps (default auto)")
     parser.add_argument("--init-from", type=Path, default=None,
                         help="warm start: begin from this checkpoint's weights (same policy type, config and data "
                              "normalisers) with a fresh optimiser and LR schedule; its training summary is kept as "
                              "training.init_from in the new checkpoint")
-    parser.add_argument("--checkpoint-every", type=float, default=5.0, help="minutes between periodic checkpoints (default 5)")
+    parser.add_argument("--checkpoint-every", type=positive_float, default=5.0, help="minutes between periodic checkpoints (default 5)")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
@@ -78,11 +86,7 @@ def _config_fields(args: argparse.Namespace) -> dict[str, Any]:
 
         unet = UNet1DConfig.preset(args.unet or "cpu")
         if args.down_dims:
-            try:
-                dims = tuple(int(v) for v in args.down_dims.split(","))
-            except ValueError:
-                raise ValueError(f"--down-dims must be comma-separated ints like 32,64,128, got {args.down_dims!r}") from None
-            unet = dataclasses.replace(unet, down_dims=dims)
+            unet = dataclasses.replace(unet, down_dims=args.down_dims)
         fields["unet"] = unet
     if args.vision is not None:
         from coursekit.nn.vision import VisionEncoderConfig
@@ -100,6 +104,8 @@ def run(args: argparse.Namespace) -> int:
     from coursekit.checkpoint import CheckpointSaver, warm_start
     from coursekit.data.episodes import EpisodeDataset
     from coursekit.data.features import default_features
+    from coursekit.device import resolve_device
+    from coursekit.outputs import clean_leftovers, replace_dir, staging_dir
     from coursekit.policies import get_policy_class
     from coursekit.policies.factory import make_policy
     from coursekit.train import TrainConfig, train
@@ -107,15 +113,14 @@ def run(args: argparse.Namespace) -> int:
 
     if args.minutes is None and args.steps is None:
         raise ValueError("give a budget: --minutes M and/or --steps N")
-    _check_out(args.out)
+    check_run_out(args)  # before any work: nothing is loaded, built or written yet
     fields = _config_fields(args)
-    known = {f.name for f in dataclasses.fields(get_policy_class(args.policy).config_class)}
-    foreign = sorted(set(fields) - known)
-    if foreign:
-        flags = ", ".join("--" + f.replace("_", "-") for f in foreign)
-        raise ValueError(f"{flags} do(es) not apply to --policy {args.policy}")
+    _check_flags_apply(args, {f.name for f in dataclasses.fields(get_policy_class(args.policy).config_class)}, fields)
+    resolve_device(args.device)  # an unavailable device is refused before the data is read
     dataset = EpisodeDataset.load(args.data)
     features = args.features or default_features(dataset.arrays)
+    if args.vision is not None and features != "pusht_image":
+        raise ValueError(f"--vision {args.vision} applies to image features (--features pusht_image), not {features}")
     overrides = {"lr": args.lr, "batch_size": args.batch_size or (64 if features == "pusht_image" else None),
                  "warmup_steps": args.warmup_steps, "lr_schedule": args.lr_schedule}
     overrides = {k: v for k, v in overrides.items() if v is not None}
@@ -131,20 +136,65 @@ def run(args: argparse.Namespace) -> int:
     prior = warm_start(policy, args.init_from) if args.init_from is not None else None
     if prior is not None:
         print(f"warm start from {args.init_from} ({prior['steps']} steps, {prior['seconds']} s)")
-    with MetricsLog(args.out) as metrics:  # metrics.csv + loss.png beside the checkpoint, during training
-        result = train(policy, batches, config, callbacks=[CheckpointSaver(args.out, dataset_meta=meta), metrics],
-                       init_from=prior)
+    for leftover in clean_leftovers(args.out):
+        print(f"removed {str(leftover)!r}, left by an interrupted earlier run", file=sys.stderr)
+    with contextlib.ExitStack() as stack:
+        run_dir = args.out
+        if args.out.exists() and any(args.out.iterdir()):  # --overwrite: keep the old run until the new is complete
+            run_dir = stack.enter_context(staging_dir(args.out))
+            print(f"training in {run_dir}; it replaces {args.out} when complete")
+        with MetricsLog(run_dir) as metrics:  # metrics.csv + loss.png beside the checkpoint, during training
+            result = train(policy, batches, config, callbacks=[CheckpointSaver(run_dir, dataset_meta=meta), metrics],
+                           init_from=prior)
+        if run_dir != args.out:
+            replace_dir(run_dir, args.out)  # one atomic exchange; the old run is then removed with the staging folder
     s = result.summary
     print(json.dumps({k: s[k] for k in ("steps", "seconds", "samples_per_s", "final_loss")}))
     print(f"wrote {args.out}")
     return 0
 
 
-def _check_out(out: Path) -> None:
-    """Before any work: --out must be a new (or empty) folder; nothing already there is overwritten."""
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"--out {str(out)!r} is a file; give a new run folder")
-    if out.is_dir() and any(out.iterdir()):
-        kind = "an earlier run" if (out / "config.json").is_file() else "not a coursekit run"
-        raise ValueError(f"--out {str(out)!r} is a non-empty folder ({kind}); choose a new run folder "
-                         "(nothing was written)")
+def is_run_dir(path: Path) -> bool:
+    """A run folder `coursekit train` wrote (finished, or interrupted before its first checkpoint).
+
+    Nothing in it but a run's files (checkpoint, metrics.csv, loss.png), and either a readable
+    checkpoint or a metrics.csv with the trainer's own header: a user's folder never qualifies.
+    """
+    from coursekit.checkpoint import CONFIG_FILE, WEIGHTS_FILE, is_checkpoint_dir
+    from coursekit.viz.run_log import COLUMNS, LOSS_PLOT_NAME, METRICS_NAME
+
+    names = {p.name for p in path.iterdir()}
+    if not names or not names <= {CONFIG_FILE, WEIGHTS_FILE, METRICS_NAME, LOSS_PLOT_NAME}:
+        return False
+    if is_checkpoint_dir(path):
+        return True
+    if names & {CONFIG_FILE, WEIGHTS_FILE}:
+        return False  # a checkpoint's file names without a readable checkpoint: not ours to replace
+    try:
+        with open(path / METRICS_NAME, encoding="utf-8") as fh:
+            return fh.readline().strip() == ",".join(COLUMNS)
+    except (OSError, UnicodeDecodeError):
+        return False
+
+
+def check_run_out(args: argparse.Namespace) -> None:
+    """Before any work: --out is new, empty, or (with --overwrite) an earlier run; never the data or inside it."""
+    from coursekit.outputs import check_output
+
+    check_output(args.out, what="coursekit run folder", is_ours=is_run_dir, directory=True, overwrite=args.overwrite,
+                 inputs=[args.data, args.init_from])
+
+
+def _check_flags_apply(args: argparse.Namespace, config_fields: set[str], fields: dict[str, Any]) -> None:
+    """Refuse a flag the chosen policy has no use for, naming the flag, its value and the policy."""
+    flag_of = {"unet": "unet" if args.down_dims is None else "down-dims", "vision": "vision", "chunk_size": "chunk-size",
+               "n_action_steps": "n-action-steps"}
+    for name in sorted(set(fields) - config_fields):
+        flag = flag_of.get(name, name.replace("_", "-"))
+        value = getattr(args, flag.replace("-", "_"), None)
+        shown = ",".join(map(str, value)) if isinstance(value, tuple) else value
+        raise ValueError(f"--{flag} {shown} does not apply to --policy {args.policy}")
+    if args.n_action_steps is not None and "temporal_ensembling" in config_fields:
+        raise ValueError(f"--n-action-steps {args.n_action_steps} does not apply to --policy {args.policy}: it executes "
+                         f"by temporal ensembling (choose Ta when evaluating: coursekit eval CKPT --no-ensembling "
+                         f"--n-action-steps N)")

@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import os
 import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -24,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from coursekit.atomic import atomic_path
+from coursekit.outputs import clean_leftovers
 
 FORMAT_VERSION = 1
 _META_KEY = "__meta__"
@@ -112,8 +114,12 @@ class EpisodeDataset:
 
     # ---- disk ---------------------------------------------------------------------------
     def save(self, path: str | os.PathLike) -> Path:
-        """Write atomically to ``path`` (``.npz``); an existing file is replaced only on success."""
+        """Write atomically to ``path`` (``.npz``); an existing file is replaced only on success.
+
+        Hidden temporaries that killed earlier writes left beside ``path`` are removed first.
+        """
         path = Path(path)
+        clean_leftovers(path)
         meta = {"format_version": FORMAT_VERSION, **self.meta}
         payload = {k: np.ascontiguousarray(v) for k, v in self.arrays.items()}
         payload[_ENDS_KEY] = self.episode_ends
@@ -125,26 +131,81 @@ class EpisodeDataset:
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> EpisodeDataset:
-        """Read a dataset written by :meth:`save`; refuse missing, truncated or corrupt files."""
+        """Read a dataset written by :meth:`save`; refuse anything else with one line saying what it is.
+
+        Missing file, a directory, a ``.npy`` array, a zip that is not a dataset, an array of
+        Python objects (never unpickled), ``__meta__`` that is not a JSON object, bad
+        ``episode_ends``, a truncated or corrupt file: each raises a :class:`DatasetError`
+        (``FileNotFoundError`` for a missing file) naming the path and the problem.
+        """
         path = Path(path)
+        where = repr(str(path))
+        if path.is_dir():
+            raise DatasetError(f"{where} is a directory, not a dataset file (.npz from `coursekit collect ...`)")
         if not path.is_file():
-            raise FileNotFoundError(f"dataset file not found: {str(path)!r} (make one with `coursekit collect ...`)")
+            raise FileNotFoundError(f"dataset file not found: {where} (make one with `coursekit collect ...`)")
+        with open(path, "rb") as fh:
+            magic = fh.read(6)
+        if magic == b"\x93NUMPY":
+            raise DatasetError(f"{where} is a single .npy array, not a coursekit dataset (an .npz of per-step "
+                               f"arrays + {_ENDS_KEY!r} + {_META_KEY!r}, from `coursekit collect ...`)")
+        if not magic.startswith(b"PK"):
+            raise DatasetError(f"{where} is not a coursekit dataset: not an .npz (zip) file (starts with {magic!r})")
         try:
+            _refuse_object_arrays(path)
             with np.load(path, allow_pickle=False) as npz:
                 names = set(npz.files)
                 if _META_KEY not in names or _ENDS_KEY not in names:
                     raise DatasetError(
-                        f"{str(path)!r} is not a coursekit dataset: it lacks {_META_KEY!r}/{_ENDS_KEY!r} "
+                        f"{where} is not a coursekit dataset: it lacks {_META_KEY!r}/{_ENDS_KEY!r} "
                         f"(found {sorted(names)[:8]})"
                     )
-                meta = json.loads(str(npz[_META_KEY]))
+                meta_text = npz[_META_KEY]
                 ends = npz[_ENDS_KEY]
                 arrays = {k: npz[k] for k in sorted(names - {_META_KEY, _ENDS_KEY})}
         except DatasetError:
             raise
-        except (zipfile.BadZipFile, EOFError, OSError, ValueError, KeyError, json.JSONDecodeError) as exc:
-            raise DatasetError(f"dataset file {str(path)!r} is truncated or corrupt ({type(exc).__name__}: {exc})") from exc
+        except (zipfile.BadZipFile, zlib.error, EOFError, OSError, ValueError, KeyError, RuntimeError,
+                NotImplementedError) as exc:  # zipfile: flipped flags read as encryption / unknown compression
+            raise DatasetError(f"dataset file {where} is truncated or corrupt ({type(exc).__name__}: {exc})") from exc
+        if meta_text.shape != () or meta_text.dtype.kind != "U":
+            raise DatasetError(f"{where}: {_META_KEY!r} must be one JSON string, got a {meta_text.dtype} array of shape {meta_text.shape}")
+        try:
+            meta = json.loads(str(meta_text))
+        except json.JSONDecodeError as exc:
+            raise DatasetError(f"{where}: {_META_KEY!r} is not valid JSON ({exc})") from None
+        if not isinstance(meta, dict):
+            raise DatasetError(f"{where}: {_META_KEY!r} must be a JSON object (dict), got a {type(meta).__name__}: {str(meta_text)[:80]!r}")
         version = meta.get("format_version")
         if version != FORMAT_VERSION:
-            raise DatasetError(f"{str(path)!r} has format_version {version!r}; this coursekit reads {FORMAT_VERSION}")
-        return cls(arrays=arrays, episode_ends=ends, meta=meta)
+            raise DatasetError(f"{where} has format_version {version!r}; this coursekit reads {FORMAT_VERSION}")
+        if ends.dtype.kind not in "iu":
+            raise DatasetError(f"{where}: {_ENDS_KEY!r} must hold integers, got dtype {ends.dtype}")
+        try:
+            return cls(arrays=arrays, episode_ends=ends, meta=meta)
+        except DatasetError as exc:
+            raise DatasetError(f"{where}: {exc}") from None
+
+
+def _refuse_object_arrays(path: Path) -> None:
+    """Read each member's .npy header (not its data) and refuse dtype object: loading it would unpickle."""
+    with zipfile.ZipFile(path) as zf:
+        for info in zf.infolist():
+            if not info.filename.endswith(".npy"):
+                continue
+            with zf.open(info) as member:
+                version = np.lib.format.read_magic(member)
+                read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+                _, _, dtype = read_header(member)
+            if dtype.hasobject:
+                raise DatasetError(f"{str(path)!r}: array {info.filename[:-4]!r} holds Python objects (dtype {dtype}); "
+                                   f"coursekit never unpickles data, so this is not a dataset it can read")
+
+
+def is_dataset_file(path: str | os.PathLike) -> bool:
+    """True if ``path`` is an .npz with the members every coursekit dataset has (only the zip index is read)."""
+    try:
+        with zipfile.ZipFile(path) as zf:
+            return {f"{_META_KEY}.npy", f"{_ENDS_KEY}.npy"} <= set(zf.namelist())
+    except (OSError, zipfile.BadZipFile, ValueError, RuntimeError, NotImplementedError):
+        return False

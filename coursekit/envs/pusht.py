@@ -43,9 +43,11 @@ import pymunk
 from gymnasium import spaces
 
 from coursekit.envs import pusht_geometry as geo
+from coursekit.envs.checks import check_reset_args, finite_array
 from coursekit.envs.image_size import size_hw
 
 OBS_TYPES = ("state", "keypoints", "pixels", "pixels_agent_pos")
+RESET_OPTIONS = {"reset_to_state": "(5,) [ax, ay, bx, by, angle] start state (None: the seeded draw)"}
 
 SIM_HZ = 100
 """Physics substeps per second (dt = 0.01)."""
@@ -169,10 +171,18 @@ class PushTEnv(gym.Env):
         The angle is set BEFORE the position, so the block lands exactly at (bx, by, angle)
         (pymunk rotates bodies about their centre of gravity; compare the legacy order in
         ``reset``). The block's own velocity is zeroed and pymunk's cached contact impulses are
-        cleared, so ``set_state(s); step(a)`` is a pure function of (s, a). (The block's velocity
-        left by the last contact of a real episode is not part of the state, so a copy taken
-        mid-push can differ from the original by a fraction of a unit over the next step.)
-        Does not touch the step counter or the episode's reward bookkeeping.
+        cleared. Does not touch the step counter or the episode's reward bookkeeping.
+
+        NOT a full copy (measured): Chipmunk keeps per-body BIAS velocities from the last
+        substep's penetration correction (used by the next substep's position update, cleared
+        after it, not reachable through pymunk) and the block's velocity from the last contact.
+        After a substep with overlap (a reset whose pusher starts inside the T or whose T starts
+        in a wall, or any push) ``set_state(s); step(a)`` can therefore differ from a fresh env
+        placed at s by a fraction of a unit, which an open-loop replay through contacts grows to
+        tens of px (0-21 px measured for expert episodes). Nothing depends on memory layout or
+        on other envs in the process: the same history gives the same result. For an exact
+        replay, reset a fresh env the way the episode was reset (same ``seed`` or
+        ``reset_to_state``) and apply the recorded actions (``coursekit.teleop.replay``).
         """
         s = self._check_state(state)
         space = self._space
@@ -221,13 +231,10 @@ class PushTEnv(gym.Env):
         applies to ``reset_to_state``. Then one physics substep runs (as in the reference) to
         resolve any initial overlap. Use ``set_state`` for an exact placement.
         """
+        options = check_reset_args(seed, options, RESET_OPTIONS, "PushTEnv")
         super().reset(seed=seed)
-        options = options or {}
         if options.get("reset_to_state") is not None:
-            s = self._check_state(options["reset_to_state"])
-            if s.shape != (5,):
-                raise ValueError(f"reset_to_state must be (5,) [ax, ay, bx, by, angle], got shape {s.shape}")
-            start = s
+            start = finite_array(options["reset_to_state"], (5,), "options['reset_to_state']", "[ax, ay, bx, by, angle]")
         else:
             draw_seed = seed if seed is not None else int(self.np_random.integers(0, 2**31 - 1))
             rs = np.random.RandomState(seed=draw_seed)
@@ -270,15 +277,8 @@ class PushTEnv(gym.Env):
 
     @staticmethod
     def _check_action(action) -> tuple[float, float]:
-        try:
-            a = np.asarray(action, dtype=np.float64)
-        except (TypeError, ValueError) as err:
-            raise ValueError(f"action must be a numeric (2,) pusher target (x, y), got {action!r}") from err
-        if a.shape != (2,):
-            raise ValueError(f"action must have shape (2,) = target (x, y), got shape {a.shape}: {action!r}")
+        a = finite_array(action, (2,), "action", "= pusher target (x, y)")
         x, y = float(a[0]), float(a[1])
-        if not (math.isfinite(x) and math.isfinite(y)):
-            raise ValueError(f"action must be finite, got {[x, y]!r}")
         # Documented departure: targets outside the world are clipped to [0, 512].
         w = geo.WORLD_SIZE
         return min(max(x, 0.0), w), min(max(y, 0.0), w)

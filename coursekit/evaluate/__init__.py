@@ -5,6 +5,7 @@
     pusht.py     PushTAdapter, evaluate_pusht (Diffusion Policy's mean-of-max protocol)
     aloha.py     ArmPairAdapter, evaluate_aloha (ACT's stage rates + strict final-state success)
     tasks.py     TASKS, make_adapter(task, policy), task_of(policy, dataset_meta)
+    behaviour.py stalled_steps / still_steps (PushT hesitation), rms_jerk (smoothness of executed actions)
     delayed.py   evaluate_delayed (chapter 11: any strategy under an inference delay d), smoothness, chunk latency
 """
 
@@ -28,6 +29,9 @@ _LAZY = {
     "STATE_COLUMNS": "coursekit.evaluate.aloha",
     "TASKS": "coursekit.evaluate.tasks",
     "make_adapter": "coursekit.evaluate.tasks",
+    "stalled_steps": "coursekit.evaluate.behaviour",
+    "still_steps": "coursekit.evaluate.behaviour",
+    "rms_jerk": "coursekit.evaluate.behaviour",
     "evaluate_delayed": "coursekit.evaluate.delayed",
     "smoothness": "coursekit.evaluate.delayed",
     "chunk_latency_ms": "coursekit.evaluate.delayed",

@@ -8,7 +8,15 @@
   student's objects where written, the library's reference (with a banner) where still a stub.
 - ``coursekit.check(id)`` (:mod:`coursekit.grading.check`) — runs one exercise's tests in a
   subprocess and prints a table (notebooks).
-- :mod:`coursekit.grading.grade` — grades a folder of submissions (``coursekit grade``).
+- :mod:`coursekit.grading.grade` — grades a folder of submissions (``coursekit grade``);
+  :mod:`~coursekit.grading.feedback` writes what students read, :mod:`~coursekit.grading.gradescope`
+  the autograder zip, :mod:`~coursekit.grading.hidden` reads instructor-only tests.
+- The trust boundary: :mod:`~coursekit.grading.runner` starts a trusted pytest process
+  (:mod:`~coursekit.grading.harness`) whose tests call student code only through
+  :mod:`~coursekit.grading.remote` -> :mod:`~coursekit.grading.protocol` (plain data, never
+  pickle) -> :mod:`~coursekit.grading.worker`, an untrusted process started by
+  :mod:`~coursekit.grading.sandbox` (bubblewrap where it works); :mod:`~coursekit.grading.scoring`
+  turns outcomes into points and hints.
 
 Nothing here imports torch or pytest at import time.
 """

@@ -252,3 +252,19 @@ def build_exercises(root: str | Path | None = None, check: bool = False) -> list
                     if not check:
                         path.unlink()
     return changed
+
+
+def blank_reference(exercise: Exercise) -> tuple[Path, str]:
+    """(path, text) of the exercise's library module with every marked block of its objects replaced
+    by a raise: what a grading worker sees in place of the reference (no delegation to it)."""
+    source = _read_source(exercise.source)
+    lines = source.text.splitlines()
+    nodes = sorted((_top_level(source.tree, name, exercise) for name in exercise.objects), key=lambda n: -n.lineno)
+    for node in nodes:  # bottom up, so the line numbers of the ones above stay valid
+        first, last = _segment(lines, node)
+        for begin, end in reversed(_marker_blocks(lines, first, last, f"{source.path.name}:{node.name}")):
+            indent = lines[begin][: len(lines[begin]) - len(lines[begin].lstrip())]
+            label = f"{exercise.source}.{_enclosing_name(node, begin + 1)}"
+            lines[begin : end + 1] = [f"{indent}raise __import__('coursekit.grading.worker', fromlist=['_'])"
+                                      f".reference_called({label!r})"]
+    return source.path, "\n".join(lines) + "\n"

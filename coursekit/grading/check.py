@@ -1,7 +1,8 @@
 """``coursekit.check("<id>")``: instant feedback on one exercise, from a notebook or a terminal.
 
-Runs the exercise's graded tests against the student's module in a sandboxed subprocess (the
-same machinery as the instructor's grader, see :mod:`coursekit.grading.runner`) and prints::
+Runs the exercise's graded tests (never the instructor's hidden ones) in a trusted process that
+calls the student's module in a sandboxed worker: the same path as the instructor's grader
+(:mod:`coursekit.grading.runner`), so what passes here passes there. Prints::
 
     Exercise 1.1 (chunk_windows): Diffusion Policy training windows with edge padding
     module: exercises/chunk_windows.py

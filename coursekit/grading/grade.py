@@ -2,14 +2,17 @@
 
 Layout of ``SUBMISSIONS_DIR``: one entry per student, either a folder (a copy of the handed-out
 ``exercises/``; the modules may also sit one folder down) or a ``.zip`` of it. The student id is
-the folder name or the zip's stem. For every student and exercise one sandboxed subprocess runs
-the graded tests (:func:`coursekit.grading.runner.run_tests`); the test files are read once at
-the start, so nothing a submission does to files on disk changes how the others are graded.
+the folder name (or the zip's stem) SANITISED: every run of characters other than letters,
+digits, ``.``, ``_`` and ``-`` becomes one ``_``, leading/trailing ``.``/``_`` are dropped (empty:
+"student"), and a clash gets ``_2``, ``_3``, ... in sorted order; the ``folder`` column of
+grades.csv maps each id back to the submission's own name. For every student one trusted test
+process runs the graded tests (:func:`coursekit.grading.runner.run_tests`), each exercise's
+student code in its own sandboxed worker; the test files are read once at the start.
 
 Written to ``--out`` (each file atomically, as soon as it is complete; contents deterministic:
 no timestamps or timings)::
 
-    grades.csv                 student x exercise points, total, max, notes
+    grades.csv                 student, folder, points per exercise, total, max, notes
     <student>/results.json     Gradescope format: score, tests[name, number, score, max_score, status, output]
     <student>/feedback.md      readable feedback: per test points, hint and what went wrong
 """
@@ -20,6 +23,7 @@ import csv
 import hashlib
 import io
 import json
+import os
 import re
 import tempfile
 import time
@@ -29,8 +33,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from coursekit.grading.paths import repo_root
-from coursekit.grading.registry import EXERCISES, Exercise, exercise_number, get_exercise
-from coursekit.grading.runner import Limits, RunResult, TestScore, read_test_sources, run_tests, score_exercise
+from coursekit.grading.registry import EXERCISES, Exercise, get_exercise
+from coursekit.grading.runner import Limits, RunResult, read_test_sources, run_tests
+from coursekit.grading.scoring import TestScore, exercise_status, score_exercise
 from coursekit.atomic import atomic_write_text
 
 _SAFE = re.compile(r"[^A-Za-z0-9._-]+")
@@ -54,6 +59,8 @@ class ExerciseGrade:
 @dataclass
 class StudentGrade:
     student: str
+    folder: str = ""
+    """The submission's own name (folder or zip) the sanitised id came from."""
     grades: list[ExerciseGrade] = field(default_factory=list)
     problem: str = ""
     """Why the submission itself could not be read (bad zip, ...), if so."""
@@ -70,6 +77,10 @@ class GradeSummary:
     out: Path
     seconds: float
     warnings: list[str] = field(default_factory=list)
+    mode: str = "bwrap"
+    """"bwrap" (each worker in its own sandbox) or "none" (not isolated)."""
+    tag: str = ""
+    """COURSEKIT_WORKER value in every worker's environment (to find leftovers)."""
 
 
 def _student_id(name: str, taken: set[str]) -> str:
@@ -122,13 +133,30 @@ def _extract_zip(archive: Path, dest: Path, exercises: list[Exercise]) -> None:
                 (dest / name).write_bytes(data)
 
 
-def _grade_one(exercise: Exercise, folder: Path, limits: Limits, sources: dict[str, bytes]) -> ExerciseGrade:
-    module = folder / f"{exercise.id}.py"
-    if not module.is_file():
-        run = RunResult(status="missing", reason=f"{exercise.id}.py was not found in the submission")
-        return ExerciseGrade(exercise, score_exercise(exercise, run), run.status, run.reason)
-    run = run_tests([exercise], folder, limits, sources)
-    return ExerciseGrade(exercise, score_exercise(exercise, run), run.status, run.reason)
+def _grade_student(exercises: list[Exercise], folder: Path, limits: Limits, sources: dict[str, bytes],
+                   hidden: tuple[dict[str, bytes], dict], mode: str, tag: str) -> list[ExerciseGrade]:
+    """All exercises of one submission: one trusted test run, one sandboxed worker per exercise."""
+    present = [e for e in exercises if (folder / f"{e.id}.py").is_file()]
+    run = run_tests(present, folder, limits, sources, hidden[0], mode=mode, tag=tag) if present else RunResult()
+    grades = []
+    for exercise in exercises:
+        points = hidden[1].get(exercise.id, {})
+        if exercise not in present:
+            missing = RunResult(status="missing", reason=f"{exercise.id}.py was not found in the submission")
+            grades.append(ExerciseGrade(exercise, score_exercise(exercise, missing, points), "missing", missing.reason))
+            continue
+        mine = [o for o in run.outcomes if o.file == f"test_{exercise.id}.py" or o.file in points]
+        status = run.status if run.status != "ok" and not mine else exercise_status(exercise, mine)
+        reason = run.reason if status == run.status and run.status != "ok" else _reason(status, mine)
+        grades.append(ExerciseGrade(exercise, score_exercise(exercise, run, points), status, reason))
+    return grades
+
+
+def _reason(status: str, outcomes) -> str:
+    if status == "ok":
+        return ""
+    first = next((o for o in outcomes if o.cause == status), None)
+    return first.message if first else status
 
 
 def _fingerprint(root: Path, exercises: list[Exercise]) -> dict[str, str]:
@@ -144,8 +172,16 @@ def _fingerprint(root: Path, exercises: list[Exercise]) -> dict[str, str]:
 
 
 def grade_submissions(submissions: str | Path, out: str | Path, exercises: list[str] | None = None,
-                      jobs: int = 1, limits: Limits | None = None, progress: bool = True) -> GradeSummary:
-    """Grade every submission in ``submissions`` and write the results under ``out``."""
+                      jobs: int = 1, limits: Limits | None = None, progress: bool = True,
+                      hidden_tests: str | Path | None = None) -> GradeSummary:
+    """Grade every submission in ``submissions`` and write the results under ``out``.
+
+    ``hidden_tests``: a folder of instructor-only tests (:mod:`coursekit.grading.hidden`).
+    Prints one line when student code cannot be isolated here (no working bubblewrap).
+    """
+    from coursekit.grading import sandbox
+    from coursekit.grading.hidden import load_hidden_tests
+
     if int(jobs) < 1:
         raise ValueError(f"jobs must be at least 1, got {jobs!r}")
     start = time.monotonic()
@@ -153,10 +189,15 @@ def grade_submissions(submissions: str | Path, out: str | Path, exercises: list[
     chosen = [get_exercise(e) for e in exercises] if exercises else list(EXERCISES)
     submissions, out = Path(submissions), Path(out)
     entries = discover(submissions, out)
+    hidden = load_hidden_tests(hidden_tests) if hidden_tests is not None else ({}, {})
     root = repo_root()
     sources = read_test_sources(chosen, root)
+    mode = sandbox.mode()
+    if mode != "bwrap":
+        print(sandbox.NOT_ISOLATED, flush=True)
+    tag = f"coursekit-grade-{os.getpid()}-{time.monotonic_ns()}"
     before = _fingerprint(root, chosen)
-    students = {sid: StudentGrade(sid) for sid, _ in entries}
+    students = {sid: StudentGrade(sid, path.name) for sid, path in entries}
 
     with tempfile.TemporaryDirectory(prefix="coursekit-submissions-") as unpack:
         tasks = []
@@ -171,18 +212,18 @@ def grade_submissions(submissions: str | Path, out: str | Path, exercises: list[
                     students[sid].problem = f"could not read {path.name}: {type(exc).__name__}: {exc}"
             else:
                 folder = _module_folder(path, chosen)
-            tasks.extend((sid, exercise, folder) for exercise in chosen)
+            tasks.append((sid, folder))
 
         from tqdm.auto import tqdm
 
         with ThreadPoolExecutor(max_workers=int(jobs)) as pool:
-            futures = [pool.submit(_grade_one, ex, folder, limits, sources) for _, ex, folder in tasks]
-            for (sid, _, _), future in tqdm(zip(tasks, futures), total=len(tasks), desc="grading", disable=not progress):
-                students[sid].grades.append(future.result())
-                if len(students[sid].grades) == len(chosen):  # a finished student is saved at once
-                    write_student(out, students[sid])
+            futures = [pool.submit(_grade_student, chosen, folder, limits, sources, hidden, mode, tag)
+                       for _, folder in tasks]
+            for (sid, _), future in tqdm(zip(tasks, futures), total=len(tasks), desc="grading", disable=not progress):
+                students[sid].grades = future.result()
+                write_student(out, students[sid])  # a finished student is saved at once
 
-    summary = GradeSummary(list(students.values()), chosen, out, time.monotonic() - start)
+    summary = GradeSummary(list(students.values()), chosen, out, time.monotonic() - start, mode=mode, tag=tag)
     after = _fingerprint(root, chosen)
     for path, digest in before.items():
         if after.get(path) != digest:
@@ -192,91 +233,25 @@ def grade_submissions(submissions: str | Path, out: str | Path, exercises: list[
     return summary
 
 
-def _test_output(score: TestScore) -> str:
-    if score.passed:
-        return "passed"
-    parts = [f"hint: {score.hint}"]
-    if score.message:
-        parts.append(f"what happened: {score.message}")
-    if score.detail:
-        parts.append("traceback (tail):\n" + score.detail)
-    if score.output:
-        parts.append("your code printed (tail):\n" + score.output)
-    return "\n".join(parts)
-
-
-def gradescope_json(student: StudentGrade) -> dict:
-    """Gradescope autograder results (https://gradescope-autograders.readthedocs.io, results.json)."""
-    tests = []
-    for g in student.grades:
-        number = exercise_number(g.exercise)
-        for i, s in enumerate(g.scores, start=1):
-            tests.append({
-                "name": f"{number} {g.exercise.id}: {s.name}",
-                "number": f"{number}.{i}",
-                "score": s.points,
-                "max_score": s.max_points,
-                "status": "passed" if s.passed else "failed",
-                "output": _test_output(s),
-                "visibility": "visible",
-            })
-    notes = [f"{g.exercise.id}: {g.reason}" for g in student.grades if g.reason]
-    if student.problem:
-        notes.insert(0, student.problem)
-    total = sum(s.max_points for g in student.grades for s in g.scores)
-    return {
-        "score": student.points,
-        "output": f"coursekit autograder: {student.points:g} / {total:g} points" + "".join(f"\n- {n}" for n in notes),
-        "visibility": "visible",
-        "stdout_visibility": "hidden",
-        "tests": tests,
-    }
-
-
-def feedback_markdown(student: StudentGrade) -> str:
-    """A readable per-student report."""
-    total = sum(s.max_points for g in student.grades for s in g.scores)
-    lines = [f"# Feedback for {student.student}", "", f"Total: **{student.points:g} / {total:g}**", ""]
-    if student.problem:
-        lines += [f"Problem with the submission: {student.problem}", ""]
-    for g in student.grades:
-        e = g.exercise
-        lines += [f"## Exercise {exercise_number(e)} ({e.id}): {e.title} — {g.points:g} / {e.max_points:g}", ""]
-        if g.reason:
-            lines += [f"**Note:** {g.reason}", ""]
-        lines += ["| test | points | result |", "|---|---|---|"]
-        lines += [f"| `{s.name}` | {s.points:g} / {s.max_points:g} | {'pass' if s.passed else 'FAIL'} |" for s in g.scores]
-        lines.append("")
-        for s in g.scores:
-            if s.passed:
-                continue
-            lines += [f"### `{s.name}`", "", f"- hint: {s.hint}"]
-            if s.message:
-                lines.append(f"- what happened: `{s.message.replace('`', chr(39))}`")
-            if s.detail:
-                lines += ["", "```", s.detail.replace("```", "'''"), "```"]
-            if s.output:
-                lines += ["", "Your code printed (tail):", "", "```", s.output.replace("```", "'''"), "```"]
-            lines.append("")
-    return "\n".join(lines).rstrip() + "\n"
-
-
 def class_csv(summary: GradeSummary) -> str:
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
     ids = [e.id for e in summary.exercises]
-    writer.writerow(["student", *ids, "total", "max", "notes"])
-    max_total = sum(e.max_points for e in summary.exercises)
+    writer.writerow(["student", "folder", *ids, "total", "max", "notes"])
     for student in sorted(summary.students, key=lambda s: s.student):
         by_id = {g.exercise.id: g for g in student.grades}
         notes = [student.problem] if student.problem else []
         notes += [f"{g.exercise.id}: {g.status}" for g in student.grades if g.status != "ok"]
-        writer.writerow([student.student, *(f"{by_id[i].points:g}" for i in ids), f"{student.points:g}",
-                         f"{max_total:g}", "; ".join(notes)])
+        max_total = sum(s.max_points for g in student.grades for s in g.scores) or \
+            sum(e.max_points for e in summary.exercises)
+        writer.writerow([student.student, student.folder, *(f"{by_id[i].points:g}" if i in by_id else "0" for i in ids),
+                         f"{student.points:g}", f"{max_total:g}", "; ".join(notes)])
     return buffer.getvalue()
 
 
 def write_student(out: Path, student: StudentGrade) -> None:
     """<student>/results.json and <student>/feedback.md, each written atomically."""
+    from coursekit.grading.feedback import feedback_markdown, gradescope_json
+
     atomic_write_text(out / student.student / "results.json", json.dumps(gradescope_json(student), indent=2) + "\n")
     atomic_write_text(out / student.student / "feedback.md", feedback_markdown(student))

@@ -4,8 +4,24 @@ An exercise is code written ONCE in the library, inside a module-level function 
 between ``# BEGIN SOLUTION`` and ``# END SOLUTION`` lines. ``coursekit exercises build`` turns
 each entry below into ``exercises/<id>.py`` (stubs) and ``solutions/<id>.py`` (complete), and
 ``tests/exercises/test_<id>.py`` grades the student's module. Adding an exercise is one
-``Exercise(...)`` entry here plus that one test file (see /dev/EXERCISES_HOWTO.md in the team
-notes, and the instructors' section of the README).
+``Exercise(...)`` entry here plus that one test file (see the instructors' section of the README).
+
+How a graded test file is written (the student's code never runs in the test's process):
+
+- set ``EXERCISE = "<id>"`` and take the ``student`` fixture (and ``sandbox`` for modules or
+  gradients); ``student.f(x)`` runs the student's ``f`` in a sandboxed worker and returns plain
+  data (numpy arrays, plain torch tensors, numbers, strings, lists, dicts); anything else (a
+  module, an executor) comes back as a handle you can call and read attributes of;
+- compare on the test's side against a trusted reference (closed form, torch, diffusers);
+- a plain function of the test passed as an argument (a model, a predictor) stays in the test's
+  process: the worker calls back. To test ONE function of an exercise, pass the REFERENCE for
+  every other one (``q_sample_fn=reference_q_sample``), so one mistake fails only its own tests;
+- modules: ``sandbox.seed(0); layer = student.FiLM(5, 3)``; ``sandbox.parameters(layer)``,
+  ``sandbox.load_state_dict(layer, state)``, ``sandbox.grad(layer, h, cond, wrt=(0, layer),
+  grad_output=g)``; ``sandbox.new("coursekit.nn.unet1d:ConditionalUnet1D", ..., film_cls=student.FiLM)``
+  builds a library object around the student's class inside the worker;
+- messages name the failing quantity ("d KL / d logvar differs ...") and the registry's hint says
+  what to fix; an optional third entry ``{"shape": ..., "value": ...}`` gives a hint per failure kind.
 """
 
 from __future__ import annotations
@@ -30,8 +46,9 @@ class Exercise:
     """Dotted library module that holds the marked code, e.g. "coursekit.data.chunks"."""
     objects: tuple[str, ...]
     """Module-level functions/classes copied (in this order) into the generated module."""
-    tests: dict[str, tuple[float, str]] = field(default_factory=dict)
-    """Test function name in tests/exercises/test_<id>.py -> (points, one-line hint)."""
+    tests: dict[str, tuple] = field(default_factory=dict)
+    """Test function name in tests/exercises/test_<id>.py -> (points, one-line hint) or
+    (points, hint, {failure kind: hint}) for kinds "shape", "dtype", "type", "value", "error"."""
 
     def __post_init__(self) -> None:
         if not _ID.match(self.id):
@@ -45,8 +62,10 @@ class Exercise:
         for name, spec in self.tests.items():
             if not name.startswith("test_") or not name.isidentifier():
                 raise ValueError(f"exercise {self.id!r}: test names must look like test_*, got {name!r}")
-            if not (isinstance(spec, tuple) and len(spec) == 2 and spec[0] > 0 and isinstance(spec[1], str) and spec[1]):
+            if not (isinstance(spec, tuple) and len(spec) in (2, 3) and spec[0] > 0 and isinstance(spec[1], str) and spec[1]):
                 raise ValueError(f"exercise {self.id!r}: test {name!r} needs (points > 0, hint), got {spec!r}")
+            if len(spec) == 3 and not (isinstance(spec[2], dict) and all(isinstance(v, str) for v in spec[2].values())):
+                raise ValueError(f"exercise {self.id!r}: test {name!r}: the third entry maps a failure kind to a hint, got {spec[2]!r}")
 
     @property
     def test_module(self) -> str:
@@ -55,7 +74,7 @@ class Exercise:
 
     @property
     def max_points(self) -> float:
-        return float(sum(points for points, _ in self.tests.values()))
+        return float(sum(spec[0] for spec in self.tests.values()))
 
 
 EXERCISES: tuple[Exercise, ...] = (
@@ -142,7 +161,9 @@ EXERCISES: tuple[Exercise, ...] = (
             "test_zero_at_the_prior": (1, "mu = 0 and logvar = 0 is the prior itself: the KL is exactly 0."),
             "test_matches_torch_distributions": (3, "KL = 1/2 * sum_j (mu_j^2 + exp(logvar_j) - logvar_j - 1); sigma^2 = exp(logvar)."),
             "test_sum_over_latent_mean_over_batch": (2, "Sum over the latent dimension (dim 1), then average over the batch (dim 0)."),
-            "test_gradients_match": (1, "Use torch operations only (no .item(), no numpy) so gradients flow to mu and logvar."),
+            "test_gradients_match": (1, "d KL / d mu = mu / B and d KL / d logvar = (exp(logvar) - 1) / (2 B): check the 1/2 and the batch mean.",
+                                     {"error": "Your code raised while computing the KL: fix that first (see the traceback).",
+                                      "value": "d KL / d mu = mu / B and d KL / d logvar = (exp(logvar) - 1) / (2 B); no gradient at all means .item() or numpy broke the graph."}),
         },
     ),
     Exercise(

@@ -7,6 +7,8 @@ the action chunk to a random step t, and train the conditional U-Net to predict 
 
 Inference (eq. 4): start from a_T ~ N(0, I) (B, Tp, Da) and denoise with DDPM (T = 100 steps, as in
 the paper's simulation results) or DDIM (10 steps by default: a CPU needs it), then unnormalise.
+``num_inference_steps=None`` means the sampler's own default (DDIM: 10, DDPM: T); a number is
+used as given by whichever sampler runs, so no setting silently depends on another.
 ``predict_chunk`` returns all Tp actions; which of them are executed is the executor's business
 (``coursekit.execution.RecedingHorizon``: pred[To-1 : To-1+Ta]).
 
@@ -39,6 +41,8 @@ from coursekit.policies.base import Normalizer
 from coursekit.policies.unet_chunk import UNetChunkConfig, UNetChunkPolicy
 
 SAMPLERS = ("ddim", "ddpm")
+DEFAULT_DDIM_STEPS = 10
+"""DDIM's own step count when none is given (the paper's code evaluates DDIM with 10 steps on a CPU budget)."""
 
 
 @dataclass
@@ -53,8 +57,8 @@ class DiffusionPolicyConfig(UNetChunkConfig):
     """Clip the predicted clean chunk to [-1, 1] at every sampler step (needs min-max normalisation)."""
     sampler: str = "ddim"
     """Default sampler for predict_chunk: 'ddim' (fast) or 'ddpm' (the paper's simulation setting)."""
-    num_inference_steps: int = 10
-    """Denoising steps of the default sampler (DDPM uses T when sampler='ddpm' and this is left at 10)."""
+    num_inference_steps: int | None = None
+    """Denoising steps of the default sampler; None: that sampler's own default (DDIM 10, DDPM T)."""
     ddim_eta: float = 0.0
     """DDIM stochasticity: 0 = deterministic given a_T (Song et al. 2021, eq. 16)."""
     ddim_timestep_spacing: str = "leading"
@@ -68,8 +72,9 @@ class DiffusionPolicyConfig(UNetChunkConfig):
             raise ValueError(f"beta_schedule must be 'squaredcos_cap_v2' or 'linear', got {self.beta_schedule!r}")
         if self.sampler not in SAMPLERS:
             raise ValueError(f"sampler must be one of {SAMPLERS}, got {self.sampler!r}")
-        if not isinstance(self.num_inference_steps, int) or not 1 <= self.num_inference_steps <= self.num_train_timesteps:
-            raise ValueError(f"num_inference_steps must be an int in [1, T={self.num_train_timesteps}], "
+        n = self.num_inference_steps
+        if n is not None and (not isinstance(n, int) or isinstance(n, bool) or not 1 <= n <= self.num_train_timesteps):
+            raise ValueError(f"num_inference_steps must be None or an int in [1, T={self.num_train_timesteps}], "
                              f"got {self.num_inference_steps!r}")
         if self.ddim_timestep_spacing not in TIMESTEP_SPACINGS:
             raise ValueError(f"ddim_timestep_spacing must be one of {TIMESTEP_SPACINGS}, got {self.ddim_timestep_spacing!r}")
@@ -103,15 +108,21 @@ class DiffusionPolicy(UNetChunkPolicy):
         return {"loss": loss}
 
     def make_sampler(self, sampler: str | None = None, num_inference_steps: int | None = None) -> DDIMSampler | DDPMSampler:
-        """A sampler over this policy's schedule: 'ddim' (default steps from config) or 'ddpm' (default T)."""
+        """A sampler over this policy's schedule.
+
+        ``sampler`` None: the config's; ``num_inference_steps`` None: the config's when the config's
+        sampler is used, else (and when the config's is None too) the sampler's own default
+        (DDIM 10, DDPM T). An explicit 0 or out-of-range count is refused by the sampler, never replaced.
+        """
         c = self.config
-        kind = sampler or c.sampler
+        kind = c.sampler if sampler is None else sampler
+        if num_inference_steps is None and kind == c.sampler:
+            num_inference_steps = c.num_inference_steps
         if kind == "ddim":
-            return DDIMSampler(self.schedule, num_inference_steps or c.num_inference_steps, eta=c.ddim_eta,
+            steps = DEFAULT_DDIM_STEPS if num_inference_steps is None else num_inference_steps
+            return DDIMSampler(self.schedule, steps, eta=c.ddim_eta,
                                clip_sample=c.clip_sample, timestep_spacing=c.ddim_timestep_spacing)
         if kind == "ddpm":
-            if num_inference_steps is None and sampler is None and c.sampler == "ddpm":
-                num_inference_steps = c.num_inference_steps
             return DDPMSampler(self.schedule, num_inference_steps, clip_sample=c.clip_sample)
         raise ValueError(f"sampler must be one of {SAMPLERS}, got {kind!r}")
 

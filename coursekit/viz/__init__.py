@@ -10,6 +10,8 @@ name below pulls its module (and that module's heavy imports) on first use.
     screenshot_html, find_chromium      headless-chromium screenshots                  (browser)
     MetricsLog, plot_metrics            a training run's metrics.csv and loss.png      (run_log)
     EpisodeRecording, write_replay      evaluated episodes as an HTML replay + frames  (replay)
+    TeleopWidget                        push the T with the mouse, recorded            (teleop_widget)
+    FigureScrubber                      sliders that redraw one figure in place        (widgets, widgets_chunks)
 """
 
 from __future__ import annotations
@@ -31,6 +33,8 @@ _LAZY = {
     "plot_metrics": "coursekit.viz.run_log",
     "EpisodeRecording": "coursekit.viz.replay",
     "write_replay": "coursekit.viz.replay",
+    "TeleopWidget": "coursekit.viz.teleop_widget",
+    "FigureScrubber": "coursekit.viz.widgets",
 }
 __all__ = sorted(_LAZY)
 __getattr__, __dir__ = lazy_loader(__name__, _LAZY, submodules=True)

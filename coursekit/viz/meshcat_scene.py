@@ -1,14 +1,16 @@
 """One meshcat server per process, owned, framed for the camera and closed cleanly.
 
 meshcat 0.3.2 has no in-process mode: ``meshcat.Visualizer()`` starts a server SUBPROCESS (zmq on
-127.0.0.1:6000+, http on 7000+). meshcat kills it at a normal interpreter exit, but after a
-SIGTERM/SIGKILL of the parent (a killed notebook kernel, a timed-out test) it is orphaned and keeps
-its ports. So this module starts the server itself (same command line as meshcat) and
+127.0.0.1:6000+, http on 7000+ on EVERY network interface). meshcat kills it at a normal
+interpreter exit, but after a SIGTERM/SIGKILL of the parent (a killed notebook kernel, a timed-out
+test) it is orphaned and keeps its ports. So this module starts the server itself
+(:mod:`coursekit.viz.meshcat_server`: meshcat's bridge, listening on 127.0.0.1 only) and
 
 - kills it in :meth:`MeshcatScene.close` (also registered with ``atexit``, and run by ``with``);
-- asks Linux to SIGKILL it when the parent dies (``prctl(PR_SET_PDEATHSIG)``), so even a SIGKILLed
-  kernel leaves no server behind. The signal fires when the *thread* that started the server
-  ends, so it is only requested from the main thread (where notebooks, scripts and pytest run).
+- hands it the read end of a pipe whose write end only this process holds: when this process
+  dies, however and from whichever thread the scene was made, the kernel closes the write end
+  and the server exits (on Linux, a scene made on the main thread also gets a parent-death
+  SIGKILL; that signal fires when the starting *thread* ends, so it is not used from others).
 
 Everything the course shows is exported with :meth:`MeshcatScene.static_html`: one self-contained
 HTML file (about 0.9 MB; three.js is inlined) with the scene and its animation, which works
@@ -60,26 +62,34 @@ def _die_with_parent() -> None:
         pass
 
 
-def _start_server() -> tuple[subprocess.Popen, str, str]:
-    """Start ``python -m meshcat.servers.zmqserver``; return (process, zmq_url, web_url).
+def _start_server() -> tuple[subprocess.Popen, str, str, int]:
+    """Start :mod:`coursekit.viz.meshcat_server`; return (process, zmq_url, web_url, lifeline fd).
 
-    The same command line and environment as ``meshcat.servers.zmqserver.
-    start_zmq_server_as_subprocess``, plus the parent-death signal and a start-up timeout.
+    The lifeline is the write end of the pipe the server watches: keep it open while the server
+    should live; closing it (or this process dying) makes the server exit.
     """
     in_main_thread = threading.current_thread() is threading.main_thread()
     env = dict(os.environ)
     # meshcat passes its own location on PYTHONPATH (robust when it was added by sys.path hacks).
     env["PYTHONPATH"] = os.path.dirname(os.path.dirname(meshcat.__file__))
-    proc = subprocess.Popen(
-        [sys.executable, "-u", "-m", "meshcat.servers.zmqserver"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.DEVNULL,  # the server logs each websocket; nobody reads it, never let it block
-        env=env,
-        start_new_session=True,  # a Ctrl-C in a notebook cell must not take the server down
-        # the parent-death signal fires when the STARTING THREAD ends: only ask for it from the
-        # main thread, or a server started from a worker thread would die with that thread
-        preexec_fn=_die_with_parent if sys.platform.startswith("linux") and in_main_thread else None,
-    )
+    read_end, lifeline = os.pipe()  # both non-inheritable (PEP 446): only the server gets read_end
+    try:
+        proc = subprocess.Popen(
+            [sys.executable, "-u", str(Path(__file__).with_name("meshcat_server.py")), "--parent-pipe", str(read_end)],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL,  # the server logs each websocket; nobody reads it, never let it block
+            env=env,
+            pass_fds=(read_end,),
+            start_new_session=True,  # a Ctrl-C in a notebook cell must not take the server down
+            # the parent-death signal fires when the STARTING THREAD ends: only ask for it from the
+            # main thread (the pipe covers every thread)
+            preexec_fn=_die_with_parent if sys.platform.startswith("linux") and in_main_thread else None,
+        )
+    except BaseException:
+        os.close(lifeline)
+        raise
+    finally:
+        os.close(read_end)
     deadline = time.monotonic() + _START_TIMEOUT_S
     zmq_url = web_url = None
     while web_url is None:
@@ -89,16 +99,19 @@ def _start_server() -> tuple[subprocess.Popen, str, str]:
         elif line.startswith("web_url="):
             web_url = line.split("=", 1)[1]
         elif not line and proc.poll() is not None:
+            os.close(lifeline)
             raise RuntimeError(f"the meshcat server exited at start-up with code {proc.returncode}")
         if time.monotonic() > deadline:
             proc.kill()
             proc.wait()
+            os.close(lifeline)
             raise RuntimeError(f"the meshcat server did not start within {_START_TIMEOUT_S:.0f} s")
     if zmq_url is None:
         proc.kill()
         proc.wait()
+        os.close(lifeline)
         raise RuntimeError("the meshcat server printed a web URL but no zmq URL")
-    return proc, zmq_url, web_url
+    return proc, zmq_url, web_url, lifeline
 
 
 def translation(xyz: Sequence[float]) -> np.ndarray:
@@ -139,7 +152,7 @@ class MeshcatScene:
     """The scene handed out by :func:`shared_scene` (one server per process)."""
 
     def __init__(self) -> None:
-        self._proc, zmq_url, self.web_url = _start_server()
+        self._proc, zmq_url, self.web_url, self._lifeline = _start_server()
         self.server_pid: int = self._proc.pid
         atexit.register(self.close)
         try:
@@ -173,6 +186,7 @@ class MeshcatScene:
         if proc.poll() is None:
             proc.kill()
         proc.wait(timeout=10)
+        os.close(self._lifeline)
         if proc.stdout is not None:
             proc.stdout.close()
 

@@ -20,6 +20,39 @@ def _eps_model(x, t, cond):
     return torch.tanh(x) * 0.8 + 0.3 * torch.sin(t.float()[:, None, None] / 7.0 + x)
 
 
+def _ddim(x_t, eps, a_t, a_prev, eta=0.0, noise=None, clip=None, mistake=""):
+    """The closed form (Song et al. 2021, eq. 12), or a named common mistake of it."""
+    r = math.sqrt
+    x0 = (x_t - r(1 - a_t) * eps) if mistake == "x0_hat not divided by sqrt(abar_t)" else (x_t - r(1 - a_t) * eps) / r(a_t)
+    if clip is not None and mistake != "x0_hat not clipped":
+        x0 = x0.clamp(-clip, clip)
+    sigma = eta * r((1 - a_prev) / (1 - a_t) * (1 - a_t / a_prev)) if a_prev < 1 else 0.0
+    keep = 1 - a_prev if mistake == "sigma^2 not taken out of the direction term" else 1 - a_prev - sigma ** 2
+    scale = r(1 - a_t) if mistake == "direction term uses sqrt(1 - abar_t) instead of sqrt(1 - abar_prev)" else r(max(keep, 0.0))
+    out = r(a_prev) * x0 + scale * eps
+    if noise is not None and mistake != "the sigma * noise term is missing":
+        out = out + sigma * noise
+    return out
+
+
+MISTAKES = ("x0_hat not divided by sqrt(abar_t)", "x0_hat not clipped", "direction term uses sqrt(1 - abar_t) instead "
+            "of sqrt(1 - abar_prev)", "sigma^2 not taken out of the direction term", "the sigma * noise term is missing")
+
+
+def _check(got, x_t, eps, a_t, a_prev, what, **kw):
+    """Compare x_prev with the closed form; on a mismatch name the quantity that went wrong."""
+    want = _ddim(x_t, eps, a_t, a_prev, **kw)
+    assert tuple(got.shape) == tuple(want.shape), f"x_prev has shape {tuple(got.shape)}, expected {tuple(want.shape)} (same as x_t)"
+    if torch.allclose(got, want, rtol=1e-5, atol=1e-5):
+        return
+    for mistake in MISTAKES:
+        if torch.allclose(got, _ddim(x_t, eps, a_t, a_prev, mistake=mistake, **kw), rtol=1e-5, atol=1e-5):
+            raise AssertionError(f"{what}: x_prev differs from the closed form; it matches the update with {mistake}")
+    x0_only = torch.allclose(got, _ddim(x_t, eps, a_t, 1.0, clip=kw.get("clip")), rtol=1e-5, atol=1e-5)
+    raise AssertionError(f"{what}: x_prev differs from the closed form (max error {float((got - want).abs().max()):.3g})"
+                         + ("; it equals x0_hat: the sqrt(abar_prev) x0_hat + direction step is missing" if x0_only else ""))
+
+
 def _diffusers_ddim(n):
     diffusers = pytest.importorskip("diffusers")
     ref = diffusers.DDIMScheduler(num_train_timesteps=100, beta_schedule="squaredcos_cap_v2", clip_sample=True,
@@ -31,36 +64,22 @@ def _diffusers_ddim(n):
 def test_deterministic_step_closed_form(student):
     g = torch.Generator().manual_seed(0)
     x_t, eps = torch.randn(SHAPE, generator=g) * 0.5, torch.randn(SHAPE, generator=g)
-    a_t, a_prev = 0.3, 0.7
-    got = student.ddim_step(eps, x_t, a_t, a_prev, eta=0.0, noise=None, clip_sample=False)
-    x0 = (x_t - math.sqrt(1 - a_t) * eps) / math.sqrt(a_t)
-    want = math.sqrt(a_prev) * x0 + math.sqrt(1 - a_prev) * eps
-    assert got.shape == SHAPE, f"shape {tuple(got.shape)}, expected {SHAPE}"
-    torch.testing.assert_close(got, want, rtol=1e-5, atol=1e-5,
-                               msg=lambda m: f"eta = 0: x_prev = sqrt(abar_prev) x0_hat + sqrt(1 - abar_prev) eps: {m}")
+    got = student.ddim_step(eps, x_t, 0.3, 0.7, eta=0.0, noise=None, clip_sample=False)
+    _check(got, x_t, eps, 0.3, 0.7, "eta = 0, no clipping")
 
 
 def test_clip_sample_clamps_x0_hat(student):
     g = torch.Generator().manual_seed(1)
     x_t, eps = torch.randn(SHAPE, generator=g) * 4, torch.randn(SHAPE, generator=g)
-    a_t, a_prev = 0.5, 0.9
-    got = student.ddim_step(eps, x_t, a_t, a_prev, eta=0.0, noise=None, clip_sample=True, clip_sample_range=1.0)
-    x0 = ((x_t - math.sqrt(1 - a_t) * eps) / math.sqrt(a_t)).clamp(-1, 1)
-    want = math.sqrt(a_prev) * x0 + math.sqrt(1 - a_prev) * eps  # the model's eps, not re-derived
-    torch.testing.assert_close(got, want, rtol=1e-5, atol=1e-5,
-                               msg=lambda m: f"clamp x0_hat to [-r, r] when clip_sample; keep eps as given: {m}")
+    got = student.ddim_step(eps, x_t, 0.5, 0.9, eta=0.0, noise=None, clip_sample=True, clip_sample_range=1.0)
+    _check(got, x_t, eps, 0.5, 0.9, "clip_sample=True, range 1 (the direction term keeps the model's eps)", clip=1.0)
 
 
 def test_stochastic_step_closed_form(student):
     g = torch.Generator().manual_seed(2)
     x_t, eps, noise = (torch.randn(SHAPE, generator=g) for _ in range(3))
-    a_t, a_prev, eta = 0.2, 0.6, 0.7
-    got = student.ddim_step(eps, x_t, a_t, a_prev, eta=eta, noise=noise, clip_sample=False)
-    sigma = eta * math.sqrt((1 - a_prev) / (1 - a_t) * (1 - a_t / a_prev))
-    x0 = (x_t - math.sqrt(1 - a_t) * eps) / math.sqrt(a_t)
-    want = math.sqrt(a_prev) * x0 + math.sqrt(1 - a_prev - sigma ** 2) * eps + sigma * noise
-    torch.testing.assert_close(got, want, rtol=1e-5, atol=1e-5,
-                               msg=lambda m: f"eta > 0: sigma = eta sqrt((1-abar_prev)/(1-abar_t) (1-abar_t/abar_prev)): {m}")
+    got = student.ddim_step(eps, x_t, 0.2, 0.6, eta=0.7, noise=noise, clip_sample=False)
+    _check(got, x_t, eps, 0.2, 0.6, "eta = 0.7 with the given noise", eta=0.7, noise=noise)
 
 
 @pytest.mark.parametrize("n,eta", [(10, 0.0), (4, 0.0), (10, 1.0)])
@@ -84,6 +103,5 @@ def test_last_step_returns_clean_estimate(student):
     x_t, eps = torch.randn(SHAPE, generator=g), torch.randn(SHAPE, generator=g)
     a_t = float(SCHEDULE.alphas_cumprod[0])
     got = student.ddim_step(eps, x_t, a_t, 1.0, eta=0.0, noise=None, clip_sample=True)
-    want = ((x_t - math.sqrt(1 - a_t) * eps) / math.sqrt(a_t)).clamp(-1, 1)
-    torch.testing.assert_close(got, want, rtol=1e-5, atol=1e-5)
-    assert torch.isfinite(got).all()
+    assert torch.isfinite(got).all(), "x_prev is not finite with abar_prev = 1 (a division by 1 - abar_prev?)"
+    _check(got, x_t, eps, a_t, 1.0, "abar_prev = 1 (the last step): x_prev must be the clipped x0_hat", clip=1.0)

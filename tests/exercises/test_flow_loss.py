@@ -73,7 +73,8 @@ def test_model_sees_the_interpolated_chunk(student):
         want = float(t[b]) * e[b] + (1 - float(t[b])) * a0[b]
         torch.testing.assert_close(seen["x_t"][b], want, rtol=1e-5, atol=1e-6,
                                    msg=lambda m: f"sample {b}: x_t must be t * noise + (1 - t) * a0: {m}")
-    assert torch.equal(seen["t"], t) and seen["cond"] is cond, "pass t and cond to velocity_model unchanged"
+    assert torch.equal(seen["t"], t), "the t given to velocity_model differs from the t passed in: pass it unchanged"
+    assert seen["cond"] is not None and torch.equal(seen["cond"], cond), "pass cond to velocity_model unchanged"
 
 
 def test_loss_matches_closed_form(student):
@@ -89,14 +90,15 @@ def test_loss_matches_closed_form(student):
         "loss = mean((v(x_t, t) - (noise - a0))^2) over all elements"
 
 
-def test_loss_backpropagates(student):
+def test_loss_backpropagates(student, sandbox):
     a0, e, t = _inputs(7, shape=(3, 5))
-    w = torch.tensor(0.3, requires_grad=True)
-    loss = student.flow_matching_loss(lambda x, tt, c: w * x, a0, None, t, e)
-    loss.backward()
-    assert w.grad is not None and torch.isfinite(w.grad), "the loss must backpropagate into the model"
+    model = sandbox.new("coursekit.grading.probes:Scale", 0.3)  # v = w * x_t, w a parameter (in the worker)
+    loss, (grads,) = sandbox.grad(student.flow_matching_loss, model, a0, None, t, e, wrt=(model,))
+    assert grads["w"] is not None and torch.isfinite(grads["w"]), \
+        "no gradient reached the model's parameter: keep the loss a torch expression"
     w2 = torch.tensor(0.3, requires_grad=True)
     tb = t[:, None]
     F.mse_loss(w2 * (tb * e + (1 - tb) * a0), e - a0).backward()
-    torch.testing.assert_close(w.grad, w2.grad, rtol=1e-4, atol=1e-6)
+    torch.testing.assert_close(grads["w"], w2.grad, rtol=1e-4, atol=1e-6,
+                               msg=lambda m: f"d loss / d w (the model's parameter) differs: {m}")
     assert math.isfinite(float(loss.detach()))

@@ -1,7 +1,8 @@
 """Exercise 2.1 (noise_loss): forward noising q_sample and the epsilon-prediction loss.
 
 References: the closed form x_t = sqrt(abar_t) x0 + sqrt(1 - abar_t) eps written here, diffusers'
-DDPMScheduler.add_noise, and torch's F.mse_loss.
+DDPMScheduler.add_noise, and torch's F.mse_loss. The epsilon_loss tests pass the REFERENCE
+q_sample (``reference_q_sample``) as ``q_sample_fn``, so a wrong q_sample fails only its own tests.
 """
 
 from __future__ import annotations
@@ -17,6 +18,12 @@ from coursekit.diffusion.schedules import NoiseSchedule
 EXERCISE = "noise_loss"
 
 ABAR = NoiseSchedule(num_train_timesteps=100).alphas_cumprod  # (T,), read-only in the tests
+
+
+def reference_q_sample(x0, t, noise, alphas_cumprod):
+    """The closed form, written here: what epsilon_loss's tests use instead of the student's q_sample."""
+    a = alphas_cumprod[t].reshape(-1, *([1] * (x0.ndim - 1)))  # (B, 1, ..., 1)
+    return a.sqrt() * x0 + (1 - a).sqrt() * noise
 
 
 def _inputs(seed, shape=(4, 16, 2)):
@@ -64,29 +71,32 @@ def test_epsilon_loss_is_mse_on_noise(student):
     cond = torch.randn(4, 1, 1, generator=torch.Generator().manual_seed(6))
     seen = {}
 
-    def eps_model(x_t, tt, c):
+    def eps_model(x_t, tt, c):  # stays in the test's process: the worker calls back
         seen["x_t"], seen["t"], seen["cond"] = x_t, tt, c
         return 0.5 * x_t + c
 
-    loss = student.epsilon_loss(eps_model, x0, cond, t, noise, ABAR.clone())
-    a = ABAR[t][:, None, None]
-    x_t = a.sqrt() * x0 + (1 - a).sqrt() * noise
-    assert "x_t" in seen, "epsilon_loss must call eps_model(x_t, t, cond)"
+    loss = student.epsilon_loss(eps_model, x0, cond, t, noise, ABAR.clone(), q_sample_fn=reference_q_sample)
+    x_t = reference_q_sample(x0, t, noise, ABAR)
+    assert "x_t" in seen, "epsilon_loss never called eps_model(x_t, t, cond)"
     torch.testing.assert_close(seen["x_t"], x_t, rtol=1e-5, atol=1e-6,
-                               msg=lambda m: f"eps_model must get the noised x_t = q_sample(x0, t, noise): {m}")
-    assert torch.equal(seen["t"], t) and seen["cond"] is cond, "pass t and cond to eps_model unchanged"
-    assert loss.ndim == 0, f"loss must be a scalar (0-d tensor), got shape {tuple(loss.shape)}"
-    torch.testing.assert_close(loss, F.mse_loss(0.5 * x_t + cond, noise), rtol=1e-5, atol=1e-7)
+                               msg=lambda m: f"the x_t given to eps_model must be q_sample_fn(x0, t, noise, abar): {m}")
+    assert torch.equal(seen["t"], t), "the t given to eps_model differs from the t passed in: pass it unchanged"
+    assert seen["cond"] is not None and torch.equal(seen["cond"], cond), \
+        "the cond given to eps_model differs from the cond passed in: pass it unchanged"
+    assert torch.is_tensor(loss), f"the loss must be a tensor, got {type(loss).__name__}"
+    assert loss.ndim == 0, f"the loss must be a scalar (0-d tensor), got shape {tuple(loss.shape)}"
+    torch.testing.assert_close(loss, F.mse_loss(0.5 * x_t + cond, noise), rtol=1e-5, atol=1e-7,
+                               msg=lambda m: f"the loss value differs from mean((eps_model(x_t) - noise)^2): {m}")
 
 
-def test_epsilon_loss_uses_q_sample_fn_and_backpropagates(student):
+def test_epsilon_loss_uses_q_sample_fn_and_backpropagates(student, sandbox):
     x0, noise, t = _inputs(7)
-    w = torch.tensor(0.3, requires_grad=True)
     fake_x_t = torch.full_like(x0, 2.0)
-    loss = student.epsilon_loss(lambda x, tt, c: w * x, x0, None, t, noise, ABAR.clone(),
-                                q_sample_fn=lambda *args: fake_x_t)
+    model = sandbox.new("coursekit.grading.probes:Scale", 0.3)  # eps = w * x_t, w a parameter (in the worker)
+    loss, (grads,) = sandbox.grad(student.epsilon_loss, model, x0, None, t, noise, ABAR.clone(),
+                                  q_sample_fn=lambda *args: fake_x_t, wrt=(model,))
     torch.testing.assert_close(loss.detach(), ((0.6 - noise) ** 2).mean(), rtol=1e-5, atol=1e-7,
-                               msg=lambda m: f"use the q_sample_fn argument to build x_t: {m}")
-    loss.backward()
-    assert w.grad is not None and torch.isfinite(w.grad), "the loss must backpropagate into the model"
-    torch.testing.assert_close(w.grad, (2 * (0.6 - noise) * 2.0).mean(), rtol=1e-4, atol=1e-6)
+                               msg=lambda m: f"the loss value: build x_t with the q_sample_fn argument: {m}")
+    assert grads["w"] is not None, "no gradient reached the model's parameter: keep the loss a torch expression"
+    torch.testing.assert_close(grads["w"], (2 * (0.6 - noise) * 2.0).mean(), rtol=1e-4, atol=1e-6,
+                               msg=lambda m: f"d loss / d w (the model's parameter) differs: {m}")

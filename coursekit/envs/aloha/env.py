@@ -44,6 +44,7 @@ from coursekit.envs.aloha.model import (
 )
 from coursekit.envs.aloha.render import CameraRenderer
 from coursekit.envs.aloha.tasks import TASKS, AlohaTask
+from coursekit.envs.checks import check_reset_args, finite_array
 from coursekit.envs.image_size import size_hw
 
 OBS_TYPES = ("state", "pixels")
@@ -106,14 +107,14 @@ class AlohaEnv(gymnasium.Env):
     # ---- gymnasium API --------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[dict, dict]:
         """Start pose, objects spawned from ``self.np_random`` (or ``options["env_state"]``)."""
+        options = check_reset_args(seed, options, {"env_state": "object poses, the task's env_state vector"},
+                                   type(self).__name__)
         super().reset(seed=seed)
-        options = options or {}
         mujoco.mj_resetData(self.model, self.data)
         self.index.set_arm_pose(self.data, np.concatenate([START_ARM_QPOS, START_ARM_QPOS]), START_FINGER)
-        if "env_state" in options:
-            env_state = np.asarray(options["env_state"], dtype=np.float64)
-            if env_state.shape != (self.task.env_state_dim,) or not np.all(np.isfinite(env_state)):
-                raise ValueError(f"options['env_state'] must be finite with shape ({self.task.env_state_dim},), got {env_state}")
+        if options.get("env_state") is not None:
+            env_state = finite_array(options["env_state"], (self.task.env_state_dim,), "options['env_state']",
+                                     "[x y z qw qx qy qz] per object")
         else:
             env_state = self.task.spawn(self.np_random)
         self.task.set_env_state(self.data, env_state)
@@ -125,11 +126,7 @@ class AlohaEnv(gymnasium.Env):
 
     def step(self, action: np.ndarray) -> tuple[dict, float, bool, bool, dict]:
         """One 50 Hz control step with a (14,) action (absolute joint targets + gripper commands)."""
-        action = np.asarray(action, dtype=np.float64)
-        if action.shape != (14,):
-            raise ValueError(f"action must have shape (14,) [left 6 joints, left g, right 6 joints, right g], got {action.shape}")
-        if not np.all(np.isfinite(action)):
-            raise ValueError(f"action contains NaN or inf: {action}")
+        action = finite_array(action, (14,), "action", "[left 6 joints, left g, right 6 joints, right g]")
         action = np.clip(action, self.action_space.low, self.action_space.high)  # documented clip
         self.index.set_action(self.data, action)
         good_qpos, good_qvel = self.data.qpos.copy(), self.data.qvel.copy()

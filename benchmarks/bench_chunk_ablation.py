@@ -1,0 +1,185 @@
+"""The chunk ablation the course argues from: is it the chunk or the generator?
+
+    # DP score vs Ta on the SHIPPED checkpoint (Ta is an execution choice: no retraining)
+    .venv/bin/python -m benchmarks.bench_chunk_ablation --only ta --episodes 200 --threads 1
+    # four heads, same data and budget, three training seeds each (about 4 x 3 x --minutes of CPU)
+    .venv/bin/python -m benchmarks.bench_chunk_ablation --only train --minutes 30 --train-seeds 0 1 2 --threads 1
+    .venv/bin/python -m benchmarks.bench_chunk_ablation --only train --minutes 0.2 --episodes 2 --no-record  # smoke
+
+Parts:
+
+- ``ta``: the shipped DP (``coursekit/checkpoints/pusht_diffusion_state``, To = 2, Tp = 16, one
+  training seed) with DDIM-10 at Ta in ``--ta`` (default 1, 2, 4, 8, 15: Ta = 16 does not fit,
+  the executed slice pred[To-1 : To-1+Ta] needs To - 1 + Ta <= Tp) on ``--episodes`` seeds from
+  ``--seed-start``: small Ta re-plans often (reactive, but may switch modes between chunks), large
+  Ta executes longer open-loop stretches (compounding error); Chi et al. 2023, Sec. 3.1 / Fig. 6.
+- ``train``: the variants of :data:`VARIANTS` (single-step regression, chunked regression, ACT,
+  DP) on the same demonstrations (``--data``, default the shipped models' 400 DART 0/5 episodes)
+  and features (``pusht_keypoints``), the same budget (``--minutes`` or ``--steps``, the "cpu"
+  recipe, one thread), each with every seed of ``--train-seeds``; evaluated on the same seeds.
+  A row per variant: the mean score over training seeds, a t-interval over training seeds
+  (95 %; with 3 seeds it is wide on purpose), and the per-seed scores in the note.
+
+Per-episode results go under ``--out`` (resumable: an existing run or evaluation is reused).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+
+SECTION = "Chunk ablation (PushT)"
+ROOT = Path(__file__).resolve().parent.parent
+DATA = Path("/work/data/pusht_400_noise0-5.npz")
+VARIANTS = {
+    "single-step regression (To=1, Tp=Ta=1)": ("regression", {"n_obs_steps": 1, "horizon": 1, "n_action_steps": 1,
+                                                               "unet": {"down_dims": (256,)}}, {}),
+    "chunked regression (To=2, Tp=16, Ta=8)": ("regression", {}, {}),
+    "ACT (k=16, temporal ensembling)": ("act", {"chunk_size": 16}, {}),
+    "Diffusion Policy DDIM-10 (To=2, Tp=16, Ta=8)": ("diffusion", {}, {"sampler": "ddim", "num_inference_steps": 10}),
+}
+"""name -> (policy type, config fields, sampling). Single-step needs a one-level U-Net (Tp = 1 cannot be halved)."""
+SHIPPED = {"diffusion": ("pusht_diffusion_state", "shipped DP DDIM-10", "dp_ddim10", {"sampler": "ddim", "num_inference_steps": 10}),
+           "regression": ("pusht_regression_state", "shipped chunked regression", "regression", {})}
+"""--policy of part ta -> (checkpoint, row label, bench_claims file tag, sampling)."""
+
+
+def seed_text(seeds: list[int]) -> str:
+    return f"{seeds[0]}-{seeds[-1]}"
+
+
+def evaluate_saved(policy, path: Path, seeds: list[int], meta: dict | None, sampling: dict) -> dict:
+    """Evaluate (or reuse ``path``): {"seeds", "max_reward", "success"} lists."""
+    from coursekit.evaluate import evaluate_pusht
+
+    if path.exists():
+        saved = json.loads(path.read_text())
+        if saved["seeds"] != seeds:
+            raise ValueError(f"{path} holds other seeds ({seed_text(saved['seeds'])}); move it aside")
+        return saved
+    r = evaluate_pusht(policy, seeds=seeds, dataset_meta=meta, progress=False, **sampling)
+    saved = {"seeds": seeds, "max_reward": r.max_reward.tolist(), "success": r.success.tolist(), "seconds": r.seconds,
+             "n_action_steps": policy.config.n_action_steps, **{k: v for k, v in sampling.items()}}
+    path.write_text(json.dumps(saved) + "\n")
+    return saved
+
+
+def part_ta(args, seeds: list[int], rec) -> None:
+    from coursekit.checkpoint import find_checkpoint, load_checkpoint, read_checkpoint_info
+    from coursekit.stats import mean_estimate, rate_estimate
+
+    ckpt, label, tag, sampling = SHIPPED[args.policy]
+    prefix = "" if args.policy == "diffusion" else f"{args.policy}_"
+    path = find_checkpoint(ckpt)
+    dp, meta = load_checkpoint(path, device="cpu"), read_checkpoint_info(path)["dataset"]
+    for ta in args.ta:
+        policy = dp.with_config(n_action_steps=int(ta))  # validated copy: To - 1 + Ta <= Tp
+        claims = ROOT / "outputs" / "bench_claims" / f"eval_{tag}_{seeds[0]}_{len(seeds)}.npz"
+        if ta == dp.config.n_action_steps and claims.exists():  # the same evaluation, made by bench_claims
+            data = np.load(claims)
+            if data["seeds"].tolist() == seeds:
+                out = args.out / f"{prefix}ta{ta}_{seeds[0]}_{len(seeds)}.json"
+                out.write_text(json.dumps({"seeds": seeds, "max_reward": data["max_reward"].tolist(),
+                                           "success": data["success"].tolist(), "seconds": float(data["seconds"]),
+                                           "from": str(claims.relative_to(ROOT))}) + "\n")
+        saved = evaluate_saved(policy, args.out / f"{prefix}ta{ta}_{seeds[0]}_{len(seeds)}.json", seeds, meta, sampling)
+        score, ok = mean_estimate(saved["max_reward"]), rate_estimate(np.asarray(saved["success"], dtype=bool))
+        rec(f"{label} score, Ta={ta}", score,
+            f"success {ok}; To={policy.config.n_obs_steps}, Tp={policy.config.horizon}; shipped checkpoint, one "
+            f"training seed; {saved['seconds']:.0f} s to evaluate")
+
+
+def part_train(args, seeds: list[int], rec) -> None:
+    import torch
+    from scipy import stats as sps
+
+    from coursekit.checkpoint import CheckpointSaver, load_checkpoint
+    from coursekit.data.episodes import EpisodeDataset
+    from coursekit.nn.unet1d import UNet1DConfig
+    from coursekit.policies import make_policy
+    from coursekit.train import TrainConfig, train
+
+    dataset = EpisodeDataset.load(args.data)
+    budget = {"max_steps": args.steps} if args.steps else {"minutes": args.minutes}
+    for name, (kind, fields, sampling) in VARIANTS.items():
+        if args.variants and not any(v in name for v in args.variants):
+            continue
+        scores = []
+        for ts in args.train_seeds:
+            slug = re.sub(r"[^a-z0-9]+", "-", name.lower()).strip("-")
+            tag = f"{slug}_seed{ts}_{'s' + str(args.steps) if args.steps else f'{args.minutes:g}min'}"
+            run = args.out / tag
+            if (run / "config.json").exists():
+                policy = load_checkpoint(run, device="cpu")
+            else:
+                cfg = dict(fields)
+                if "unet" in cfg:
+                    cfg["unet"] = UNet1DConfig(**cfg["unet"])
+                policy, batches, recipe = make_policy(kind, dataset, features="pusht_keypoints", recipe="cpu", seed=ts,
+                                                      **cfg)
+                torch.manual_seed(ts)
+                train(policy, batches, TrainConfig(**{**recipe, **budget, "seed": ts, "num_threads": args.threads,
+                                                      "progress": False, "checkpoint_every_minutes": None}),
+                      callbacks=[CheckpointSaver(run, dataset_meta=dataset.meta)])
+            saved = evaluate_saved(policy, run / f"eval_{seeds[0]}_{len(seeds)}.json", seeds, dataset.meta, sampling)
+            scores.append(float(np.mean(saved["max_reward"])))
+            print(f"{name}, training seed {ts}: score {scores[-1]:.3f}", flush=True)
+        k = len(scores)
+        mean, sd = float(np.mean(scores)), float(np.std(scores, ddof=1)) if k > 1 else 0.0
+        half = float(sps.t.ppf(0.975, k - 1) * sd / np.sqrt(k)) if k > 1 else 0.0
+        rec(f"{name} score, {k} training seed(s)", (mean, max(0.0, mean - half), min(1.0, mean + half), k * len(seeds)),
+            f"mean over training seeds {args.train_seeds} (per seed: {', '.join(f'{s:.3f}' for s in scores)}; "
+            f"sd {sd:.3f}); 95 % t-interval over training seeds; {args.data.name}, pusht_keypoints, recipe cpu, "
+            f"budget {budget}, {args.threads} thread(s)")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--only", choices=("ta", "train"), default="ta", help="ta: the shipped DP vs Ta; train: the multi-seed ablation")
+    parser.add_argument("--episodes", type=int, default=200)
+    parser.add_argument("--seed-start", type=int, default=100_000, help="protocol 100000, validation 200000")
+    parser.add_argument("--policy", choices=sorted(SHIPPED), default="diffusion", help="shipped checkpoint (part ta)")
+    parser.add_argument("--ta", type=int, nargs="+", default=[15, 8, 4, 2, 1], help="Ta values (part ta)")
+    parser.add_argument("--train-seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--variants", nargs="+", default=[], help="substrings of variant names to run (default all)")
+    parser.add_argument("--minutes", type=float, default=30.0, help="training budget per run (wall clock)")
+    parser.add_argument("--steps", type=int, default=None, help="training budget in optimiser steps instead")
+    parser.add_argument("--data", type=Path, default=DATA)
+    parser.add_argument("--out", type=Path, default=ROOT / "outputs" / "bench_chunk_ablation")
+    parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--no-record", action="store_true")
+    args = parser.parse_args(argv)
+    import torch
+
+    torch.set_num_threads(args.threads)
+    if args.episodes < 1:
+        raise SystemExit(f"--episodes must be >= 1, got {args.episodes}")
+    if args.only == "train" and not args.data.exists():
+        raise SystemExit(f"--data {args.data} does not exist (make it with: coursekit collect pusht --episodes 400 "
+                         f"--action-noise 0,5)")
+    seeds = list(range(args.seed_start, args.seed_start + args.episodes))
+    args.out.mkdir(parents=True, exist_ok=True)
+    cmd = f".venv/bin/python -m benchmarks.bench_chunk_ablation --only {args.only} --episodes {args.episodes} " \
+          f"--seed-start {args.seed_start} --threads {args.threads}" + (f" --policy {args.policy}" if args.only == "ta" else "")
+    if args.only == "train":
+        cmd += f" --train-seeds {' '.join(map(str, args.train_seeds))} " + (f"--steps {args.steps}" if args.steps
+                                                                             else f"--minutes {args.minutes:g}")
+
+    def rec(name, est, note):
+        value, lo, hi, n = (est.value, est.lo, est.hi, est.n) if hasattr(est, "value") else est
+        print(f"  {name}: {value:.3f} [{lo:.3f}, {hi:.3f}] (n={n}); {note}", flush=True)
+        if not args.no_record:
+            from benchmarks.results import record
+
+            record(SECTION, name, value, "", cmd, note=note, interval=(lo, hi), n=n, seeds=seed_text(seeds))
+
+    (part_ta if args.only == "ta" else part_train)(args, seeds, rec)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

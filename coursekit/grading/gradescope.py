@@ -1,0 +1,149 @@
+"""The Gradescope autograder: the same graded tests, one container per submission (any class size).
+
+``coursekit grade --gradescope-autograder autograder.zip [--exercise ID ...] [--hidden-tests DIR]``
+writes a zip with, at its root:
+
+- ``setup.sh``: run once when Gradescope builds the image (Ubuntu, as root): installs
+  bubblewrap and Python >= 3.11, and the pinned ``environment.txt`` into ``source/.venv``;
+- ``run_autograder``: run per submission; grades ``/autograder/submission`` with
+  ``python -m coursekit.grading.gradescope run`` and writes ``/autograder/results/results.json``;
+- the ``coursekit`` package (no checkpoints), ``pyproject.toml``, ``environment.txt``, the graded
+  test files of the chosen exercises, the hidden tests (``hidden/``) and ``autograder.json``
+  (exercises and limits). No ``solutions/``.
+
+``AUTOGRADER_ROOT`` (default ``/autograder``) and ``COURSEKIT_PYTHON`` (default the venv's
+python) override the paths, so a test can run ``run_autograder`` against a simulated tree.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import stat
+import sys
+import tempfile
+import zipfile
+from pathlib import Path
+
+from coursekit.grading.paths import repo_root
+from coursekit.grading.registry import EXERCISES, get_exercise
+from coursekit.grading.runner import Limits
+from coursekit.atomic import atomic_write_text
+
+SETUP = """#!/usr/bin/env bash
+# Gradescope image build (Ubuntu, root): bubblewrap, Python >= 3.11 and the pinned environment.
+set -euo pipefail
+export DEBIAN_FRONTEND=noninteractive
+apt-get update -qq
+apt-get install -y -qq bubblewrap python3 python3-venv python3-pip >/dev/null
+PY=""
+for candidate in python3.13 python3.12 python3.11 python3; do
+  if command -v "$candidate" >/dev/null && "$candidate" -c 'import sys; sys.exit(sys.version_info < (3, 11))'; then
+    PY="$candidate"; break
+  fi
+done
+if [ -z "$PY" ]; then
+  apt-get install -y -qq python3.11 python3.11-venv >/dev/null
+  PY=python3.11
+fi
+cd /autograder/source
+"$PY" -m venv .venv
+.venv/bin/python -m pip install -q --upgrade pip
+.venv/bin/python -m pip install -q -r environment.txt
+"""
+
+RUN = """#!/usr/bin/env bash
+# Gradescope, per submission: grade /autograder/submission, write /autograder/results/results.json.
+set -u
+ROOT="${AUTOGRADER_ROOT:-/autograder}"
+SRC="$ROOT/source"
+PY="${COURSEKIT_PYTHON:-$SRC/.venv/bin/python}"
+mkdir -p "$ROOT/results"
+cd "$SRC"
+PYTHONPATH="$SRC" COURSEKIT_ROOT="$SRC" OMP_NUM_THREADS=1 exec "$PY" -m coursekit.grading.gradescope run \\
+  --source "$SRC" --submission "$ROOT/submission" --results "$ROOT/results/results.json"
+"""
+
+
+def _package_files(package: Path):
+    for path in sorted(package.rglob("*")):
+        rel = path.relative_to(package)
+        if path.is_file() and "__pycache__" not in rel.parts and rel.parts[0] != "checkpoints" \
+                and path.suffix not in (".pyc", ".safetensors", ".npz"):
+            yield path, rel
+
+
+def write_autograder(zip_path: str | Path, exercises: list[str] | None = None, hidden_tests: str | Path | None = None,
+                     limits: Limits | None = None) -> Path:
+    """Write the autograder zip (refuses to overwrite an existing file); returns its path."""
+    from coursekit.grading.hidden import load_hidden_tests
+
+    zip_path = Path(zip_path)
+    if zip_path.exists():
+        raise ValueError(f"{zip_path} already exists: choose a new name (nothing was written)")
+    if not zip_path.parent.is_dir():
+        raise FileNotFoundError(f"folder {str(zip_path.parent)!r} does not exist")
+    chosen = [get_exercise(e) for e in exercises] if exercises else list(EXERCISES)
+    hidden = load_hidden_tests(hidden_tests)[0] if hidden_tests is not None else {}
+    limits = limits or Limits()
+    root = repo_root()
+    config = {"exercises": [e.id for e in chosen],
+              "limits": {k: getattr(limits, k) for k in ("timeout_s", "test_timeout_s", "memory_mb", "output_mb", "disk_mb")}}
+    tmp = zip_path.with_name(f".{zip_path.name}.partial")
+    with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        def add_text(name: str, text: str, executable: bool = False) -> None:
+            info = zipfile.ZipInfo(name, date_time=(2020, 1, 1, 0, 0, 0))
+            info.external_attr = ((0o755 if executable else 0o644) | stat.S_IFREG) << 16
+            info.compress_type = zipfile.ZIP_DEFLATED
+            zf.writestr(info, text)
+
+        add_text("setup.sh", SETUP, executable=True)
+        add_text("run_autograder", RUN, executable=True)
+        add_text("autograder.json", json.dumps(config, indent=1) + "\n")
+        for name in ("pyproject.toml", "environment.txt"):
+            add_text(name, (root / name).read_text())
+        for path, rel in _package_files(root / "coursekit"):
+            zf.write(path, f"coursekit/{rel.as_posix()}")
+        add_text("tests/exercises/conftest.py", (root / "tests" / "exercises" / "conftest.py").read_text())
+        for e in chosen:
+            add_text(e.test_module, (root / e.test_module).read_text())
+        for name, data in hidden.items():
+            add_text(f"hidden/{name}", data.decode())
+    tmp.replace(zip_path)
+    return zip_path
+
+
+def run(source: Path, submission: Path, results: Path) -> int:
+    """Grade one Gradescope submission folder and write its results.json."""
+    from coursekit.grading.grade import grade_submissions
+
+    config = json.loads((source / "autograder.json").read_text())
+    limits = Limits(**config["limits"])
+    hidden = source / "hidden" if (source / "hidden").is_dir() else None
+    with tempfile.TemporaryDirectory(prefix="coursekit-gradescope-") as tmp:
+        subs = Path(tmp) / "submissions"
+        subs.mkdir()
+        (subs / "submission").symlink_to(submission.resolve(), target_is_directory=True)
+        summary = grade_submissions(subs, Path(tmp) / "out", config["exercises"], jobs=1, limits=limits,
+                                    progress=False, hidden_tests=hidden)
+        result = json.loads((Path(tmp) / "out" / "submission" / "results.json").read_text())
+    if summary.mode != "bwrap":
+        result["output"] += "\n(graded without OS isolation: bubblewrap was not usable in this container)"
+    atomic_write_text(results, json.dumps(result, indent=2) + "\n")
+    print(result["output"])
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m coursekit.grading.gradescope")
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("run", help="grade one submission (what run_autograder calls)")
+    p.add_argument("--source", type=Path, required=True)
+    p.add_argument("--submission", type=Path, required=True)
+    p.add_argument("--results", type=Path, required=True)
+    args = parser.parse_args(argv)
+    return run(args.source, args.submission, args.results)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

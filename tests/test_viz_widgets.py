@@ -1,0 +1,113 @@
+"""The scrub widgets: each control redraws its figure in place, from the right numbers.
+
+References: the ensembling replay against the defining weighted average of ACT (Sec. III-B,
+w_i = exp(-m i), oldest first) computed directly; the chunk replay against the executor's
+contract (a chunk every Ta steps, its rows To-1 ... To-1+Ta-1 executed).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("ipywidgets")
+
+from coursekit.viz.widgets import FigureScrubber, ensemble_actions, ensemble_scrubber  # noqa: E402
+
+
+def test_scrubber_redraws_in_place():
+    import ipywidgets as widgets
+
+    seen = []
+
+    def draw(fig, a):
+        seen.append(a)
+        fig.add_subplot().plot([0, 1], [0, a])
+
+    s = FigureScrubber(draw, {"a": widgets.IntSlider(value=1, min=0, max=5)}, figsize=(2, 2))
+    first, image = bytes(s.image.value), s.image
+    assert first.startswith(b"\x89PNG") and s.redraws == 1
+    s.controls["a"].value = 4
+    assert seen == [1, 4] and s.redraws == 2
+    assert s.image is image and bytes(s.image.value) != first  # same widget, new picture
+    with pytest.raises(ValueError, match="at least one"):
+        FigureScrubber(draw, {})
+
+
+def test_ensemble_replay_is_the_weighted_average_of_act():
+    rng = np.random.default_rng(0)
+    T, k, Da = 12, 4, 3
+    chunks = rng.normal(size=(T, k, Da))
+    for m, newest_first in ((0.0, False), (0.3, False), (0.3, True), (2.0, False)):
+        got = ensemble_actions(chunks, m, newest_first)
+        for t in range(T):
+            made = [s for s in range(max(0, t - k + 1), t + 1)]  # oldest first
+            preds = np.array([chunks[s, t - s] for s in made])
+            order = preds[::-1] if newest_first else preds
+            w = np.exp(-m * np.arange(len(order)))
+            np.testing.assert_allclose(got[t], (w[:, None] * order).sum(0) / w.sum(), rtol=1e-12, atol=1e-12)
+    s = ensemble_scrubber(chunks, joint=1, joint_name="j1", every=2)
+    before = bytes(s.image.value)
+    s.controls["m"].value = 5.0
+    assert s.redraws == 2 and bytes(s.image.value) != before
+    with pytest.raises(ValueError, match=r"\(T, k, Da\)"):
+        ensemble_actions(chunks[0], 0.1)
+
+
+@pytest.fixture(scope="module")
+def tiny_dp():
+    torch = pytest.importorskip("torch")
+    from coursekit.experts.pusht_planner import collect_dataset
+    from coursekit.policies import make_policy
+
+    torch.manual_seed(0)
+    data = collect_dataset(2, seed=0, progress=False)
+    policy, _, _ = make_policy("diffusion", data, batch_size=4, seed=0)
+    return policy
+
+
+def test_chunk_replay_follows_the_receding_horizon_contract(tiny_dp):
+    from coursekit.viz.widgets_chunks import chunk_replay, record_chunk_rollouts
+
+    runs = record_chunk_rollouts(tiny_dp, seed=100_000, n_action_steps=(1, 5), max_steps=12)
+    to, tp = tiny_dp.config.n_obs_steps, tiny_dp.config.horizon
+    for ta, run in runs.items():
+        n = len(run.actions)
+        np.testing.assert_array_equal(run.made_at, np.arange(0, n, ta))  # a new chunk every Ta steps
+        assert run.chunks.shape == (len(run.made_at), tp, 2)
+        for t in range(n):  # the executed action is row To - 1 + (t - t0) of the chunk in use
+            c = run.chunk_at(t)
+            np.testing.assert_allclose(run.actions[t], run.chunks[c, to - 1 + t - run.made_at[c]], atol=1e-5)
+    s = chunk_replay(runs)
+    before = bytes(s.image.value)
+    s.controls["step"].value = 7
+    after_step = bytes(s.image.value)
+    s.controls["ta"].value = 1
+    assert s.redraws == 3 and len({before, after_step, bytes(s.image.value)}) == 3
+    with pytest.raises(ValueError, match="Ta = 99"):
+        record_chunk_rollouts(tiny_dp, seed=100_000, n_action_steps=(99,))
+
+
+def test_cvae_scrubber_decodes_the_chosen_z():
+    torch = pytest.importorskip("torch")
+    from coursekit.policies.act import ACTConfig, ACTPolicy
+    from coursekit.viz.widgets import cvae_scrubber
+
+    torch.manual_seed(0)
+    K = 5
+    models = {}
+    for beta in (0.01, 1.0):
+        p = ACTPolicy(ACTConfig(obs_dim=1, action_dim=1, chunk_size=K, hidden_dim=16, ff_dim=32, n_heads=2,
+                                n_encoder_layers=1, n_decoder_layers=1, n_vae_encoder_layers=1, latent_dim=3,
+                                dropout=0.0, kl_weight=beta))
+        p.fit_normalizers({"obs": np.linspace(-1, 1, 8, dtype=np.float32)[:, None]},
+                          np.linspace(-1, 1, 8, dtype=np.float32)[:, None])
+        models[beta] = p.eval()
+    mu = torch.tensor([[0.0, 2.0, 0.0]] * 4)  # dimension 1 carries the information
+
+    s = cvae_scrubber(models, lambda p: (mu, torch.zeros_like(mu)))
+    first = bytes(s.image.value)
+    s.controls["z"].value = 2.0
+    second = bytes(s.image.value)
+    s.controls["beta"].value = 0.01
+    assert s.redraws == 3 and first != second != bytes(s.image.value)
