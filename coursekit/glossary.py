@@ -17,6 +17,7 @@ GLOSSARY: dict[str, tuple[str, str]] = {
     "Da": ("action_dim", "dimension of one action (PushT 2, ALOHA 14)"),
     "Do": ("obs_dim", "dimension of one low-dim observation (PushT state 5 -> 6 features)"),
     "N": ("num_inference_steps", "sampler steps per chunk: DDIM denoising or flow-matching Euler steps (10)"),
+    "d": ("delay", "inference delay in control steps, d = ceil(chunk latency / control period) (chapter 11)"),
 }
 
 

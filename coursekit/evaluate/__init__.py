@@ -6,6 +6,7 @@
     aloha.py     ArmPairAdapter, evaluate_aloha (ACT's stage rates + strict final-state success)
     tasks.py     TASKS, make_adapter(task, policy), task_of(policy, dataset_meta)
     behaviour.py stalled_steps / still_steps (PushT hesitation), rms_jerk (smoothness of executed actions)
+    delayed.py   evaluate_delayed (chapter 11: any strategy under an inference delay d), smoothness, chunk latency
 """
 
 from __future__ import annotations
@@ -31,6 +32,11 @@ _LAZY = {
     "stalled_steps": "coursekit.evaluate.behaviour",
     "still_steps": "coursekit.evaluate.behaviour",
     "rms_jerk": "coursekit.evaluate.behaviour",
+    "evaluate_delayed": "coursekit.evaluate.delayed",
+    "smoothness": "coursekit.evaluate.delayed",
+    "chunk_latency_ms": "coursekit.evaluate.delayed",
+    "latency_delay": "coursekit.evaluate.delayed",
+    "STRATEGIES": "coursekit.evaluate.delayed",
 }
 __all__ = sorted(_LAZY)
 __getattr__, __dir__ = lazy_loader(__name__, _LAZY)

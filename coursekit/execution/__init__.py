@@ -6,6 +6,9 @@ check), and has ``reset(obs (B, ...))`` and ``act(obs (B, ...)) -> (B, Da)``:
 
 - :class:`RecedingHorizon` (Diffusion Policy): execute Ta actions of each chunk, then re-plan.
 - :class:`TemporalEnsemble` (ACT): predict every step, average the overlapping chunks.
+- Under an inference delay of d steps (:mod:`coursekit.execution.delay`, chapter 11):
+  :class:`Synchronous`, :class:`AsyncChunking`, :class:`DelayedEnsemble` and
+  :class:`RealTimeChunking` (:mod:`coursekit.execution.rtc`).
 
 Classes load lazily (``coursekit.execution.receding`` needs neither torch nor numpy at import).
 """
@@ -20,6 +23,14 @@ _LAZY = {
     "TemporalEnsemble": "coursekit.execution.ensembling",
     "ExecutionSpec": "coursekit.execution.spec",
     "check_horizons": "coursekit.execution.spec",
+    "CONTROL_HZ": "coursekit.execution.delay",
+    "delay_steps": "coursekit.execution.delay",
+    "DelayedExecutor": "coursekit.execution.delay",
+    "Synchronous": "coursekit.execution.delay",
+    "AsyncChunking": "coursekit.execution.delay",
+    "DelayedEnsemble": "coursekit.execution.delay",
+    "RealTimeChunking": "coursekit.execution.rtc",
+    "rtc_weights": "coursekit.execution.rtc",
 }
 __all__ = sorted(_LAZY)
 __getattr__, __dir__ = lazy_loader(__name__, _LAZY)

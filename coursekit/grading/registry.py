@@ -210,6 +210,20 @@ EXERCISES: tuple[Exercise, ...] = (
             "test_first_order_on_a_linear_field": (2, "Euler on dx/dt = x gives x1 * (1 - 1/N)^N after N steps."),
         },
     ),
+    Exercise(
+        id="async_chunking",
+        chapter=11,
+        title="Naive asynchronous chunk execution under an inference delay of d steps",
+        source="coursekit.execution.delay",
+        objects=("AsyncChunking",),
+        tests={
+            "test_zero_delay_is_receding_horizon": (2, "With d = 0 a request arrives at once: request every Ta steps and play the chunk from its start."),
+            "test_switch_indices_on_a_hand_built_stream": (3, "Receive first, then request if due, then receive again; play current.action_at(t): index t - request."),
+            "test_requests_see_the_newest_observations": (2, "Request at step t after pushing obs_t: next_request = t + self.period (max(Ta, d))."),
+            "test_delay_longer_than_ta_holds_the_last_action": (2, "Only one inference at a time; past the chunk's end action_at holds its last action."),
+            "test_batch_rows_and_start_offset": (1, "Return self._emit(action, ...) with action (B, Da) = the current chunk's column for step t."),
+        },
+    ),
 )
 
 

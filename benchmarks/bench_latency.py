@@ -1,0 +1,228 @@
+"""The latency budget (chapter 11, §10.4): chunk latency -> delay d, and score vs d for each strategy.
+
+Parts (``--only``; default: both):
+
+- ``latency``: median ms per chunk (batch 1, this CPU) of every head and sampler, the d it means
+  at each control rate (PushT 10 Hz, arm pair 50 Hz), and ms per action with the head's own executor;
+  RTC's guided sampler is timed too (it adds a backward pass per step).
+- ``curves``: the score of each (head, strategy, d) on held-out seeds with
+  :func:`coursekit.evaluate.delayed.evaluate_delayed`, plus the smoothness of the executed actions
+  (mean jump at chunk switches, largest jerk). PushT: mean of max coverage with a bootstrap 95 %
+  interval; transfer cube: strict success with a Wilson interval.
+
+The protocol is 200 held-out seeds (100000-100199) per point for d in {0, 1, 2, 4, 8}. Every point
+is evaluated in blocks of ``--block`` seeds cached as JSON under ``--cache`` (never in the
+repository), so an interrupted or partial run resumes where it stopped; a row is recorded only
+for the seeds actually evaluated, with n and the seed range in the row. Run a subset with
+``--heads``, ``--strategies``, ``--d``, ``--episodes`` and ``--seed-start``, e.g.::
+
+    .venv/bin/python -m benchmarks.bench_latency --only curves --heads dp --strategies async,rtc --d 0,4 --episodes 20
+
+Heads: dp (shipped PushT DP, its DDIM-10), dp-ddpm (the same with DDPM-100), flow (the shipped
+PushT flow policy, Euler-10, if present), act (ACT on PushT), act-cube (ACT, transfer cube),
+dp-cube (DP, transfer cube). RTC needs a diffusion or flow head and is skipped for ACT.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.results import record
+
+ROOT = Path(__file__).resolve().parent.parent
+CKPT = ROOT / "coursekit" / "checkpoints"
+COMMAND = ".venv/bin/python -m benchmarks.bench_latency"
+SECTION = "Latency budget"
+HEADS = {  # name -> (checkpoint dir, task, sampling options, label)
+    "dp": ("pusht_diffusion_state", "pusht", {}, "PushT DP DDIM-10"),
+    "dp-ddpm": ("pusht_diffusion_state", "pusht", {"sampler": "ddpm", "num_inference_steps": 100}, "PushT DP DDPM-100"),
+    "flow": ("pusht_flow_state", "pusht", {}, "PushT flow Euler-10"),
+    "act": ("act_pusht", "pusht", {}, "PushT ACT"),
+    "act-cube": ("act_transfer_cube", "transfer_cube", {}, "transfer cube ACT"),
+    "dp-cube": ("dp_transfer_cube", "transfer_cube", {}, "transfer cube DP DDIM-10"),
+}
+DELAYS = (0, 1, 2, 4, 8)
+STRATEGY_NAMES = ("sync", "async", "ensemble", "rtc")
+
+
+def _csv(text: str, allowed: tuple | None, kind: type = str) -> list:
+    items = [kind(x) for x in text.split(",") if x.strip()]
+    if allowed is not None:
+        bad = [x for x in items if x not in allowed]
+        if bad:
+            raise SystemExit(f"unknown value(s) {bad}; expected some of {list(allowed)}")
+    return items
+
+
+def load_head(name: str):
+    from coursekit.checkpoint import load_checkpoint
+
+    path = CKPT / HEADS[name][0]
+    if not path.is_dir():
+        return None
+    return load_checkpoint(path, device="cpu")
+
+
+def part_latency(args: argparse.Namespace) -> None:
+    from coursekit.evaluate.delayed import chunk_latency_ms, latency_delay
+
+    for name in args.heads:
+        policy = load_head(name)
+        if policy is None:
+            print(f"{name}: no checkpoint {HEADS[name][0]}, skipped")
+            continue
+        _, task, sampling, label = HEADS[name]
+        ms = chunk_latency_ms(policy, task, sampling=sampling, repeats=args.repeats)
+        spec = policy.execution_spec()
+        per_action = ms / (1 if spec.temporal_ensembling else spec.n_action_steps)
+        d10, d50 = latency_delay(ms, "pusht"), latency_delay(ms, "transfer_cube")
+        note = (f"batch 1, median of {args.repeats} after a warm-up, torch threads {_threads()}, 1-min load "
+                f"average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; d = ceil(latency x rate): "
+                f"{d10} at 10 Hz (PushT), {d50} at 50 Hz (arm pair)")
+        print(f"{label}: {ms:.1f} ms per chunk, {per_action:.2f} ms per action, d = {d10} at 10 Hz, {d50} at 50 Hz")
+        record(SECTION, f"{label}: ms per chunk", round(ms, 1), "ms", f"{COMMAND} --only latency", note=note)
+        record(SECTION, f"{label}: ms per action (own executor)", round(per_action, 2), "ms",
+               f"{COMMAND} --only latency", note=note)
+        if policy.policy_type in ("diffusion", "flow"):
+            g = chunk_latency_ms(policy, task, sampling=sampling, repeats=args.repeats, guided=True)
+            print(f"{label} RTC-guided: {g:.1f} ms per chunk ({g / ms:.1f}x)")
+            record(SECTION, f"{label}: ms per RTC-guided chunk", round(g, 1), "ms", f"{COMMAND} --only latency",
+                   note=f"guidance adds a backward pass per step ({g / ms:.1f}x the plain chunk); " + note)
+
+
+def _threads() -> int:
+    import torch
+
+    return torch.get_num_threads()
+
+
+def _block_file(cache: Path, name: str, strategy: str, d: int, start: int, n: int, args: argparse.Namespace) -> Path:
+    rtc = f"_beta{args.max_guidance:g}_{args.prefix}" if strategy == "rtc" else ""
+    tag = f"{name}_{strategy}_d{d}_s{start}_n{n}_seed{args.seed}{rtc}"
+    return cache / f"{tag}.json"
+
+
+def run_block(policy, name: str, strategy: str, d: int, seeds: list[int], args: argparse.Namespace) -> dict:
+    from coursekit.evaluate.delayed import evaluate_delayed, smoothness
+
+    _, task, sampling, _ = HEADS[name]
+    r = evaluate_delayed(policy, task, strategy, d, seeds, seed=args.seed, sampling=sampling, record=True,
+                         max_guidance=args.max_guidance, prefix=args.prefix, progress=False)
+    out = {"seeds": seeds, "max_reward": r.max_reward.tolist(), "success": r.success.astype(int).tolist(),
+           "smooth": smoothness(r.actions, r.info["switches"]), "seconds": r.seconds}
+    if task != "pusht":
+        out["strict"] = (r.states[:, -1, 1] > 0.5).astype(int).tolist()
+    return out
+
+
+def part_curves(args: argparse.Namespace) -> None:
+    from coursekit.stats import bootstrap_interval, wilson_interval
+
+    cache = Path(args.cache).expanduser()
+    cache.mkdir(parents=True, exist_ok=True)
+    seeds_all = list(range(args.seed_start, args.seed_start + args.episodes))
+    blocks = [seeds_all[i:i + args.block] for i in range(0, len(seeds_all), args.block)]
+    for name in args.heads:
+        policy = load_head(name)
+        if policy is None:
+            print(f"{name}: no checkpoint {HEADS[name][0]}, skipped")
+            continue
+        _, task, _, label = HEADS[name]
+        for strategy in args.strategies:
+            if strategy == "rtc" and policy.policy_type not in ("diffusion", "flow"):
+                continue
+            for d in args.d:
+                parts = []
+                for b in blocks:
+                    f = _block_file(cache, name, strategy, d, b[0], len(b), args)
+                    if f.is_file():
+                        parts.append(json.loads(f.read_text()))
+                        continue
+                    part = run_block(policy, name, strategy, d, b, args)
+                    tmp = f.with_suffix(".tmp")
+                    tmp.write_text(json.dumps(part))
+                    tmp.replace(f)  # atomic: a killed run leaves no half-written block
+                    parts.append(part)
+                    print(f"  {label} {strategy} d={d} seeds {b[0]}..{b[-1]}: {np.mean(part['max_reward']):.3f} "
+                          f"({part['seconds']:.0f} s)", flush=True)
+                _record_point(label, task, strategy, d, parts, args, bootstrap_interval, wilson_interval)
+
+
+def _record_point(label, task, strategy, d, parts, args, bootstrap_interval, wilson_interval) -> None:
+    seeds = [s for p in parts for s in p["seeds"]]
+    n = len(seeds)
+    shown = strategy
+    if strategy == "rtc":  # variants get their own rows
+        shown += "" if args.prefix == "guide" else f" ({args.prefix} prefix)"
+        shown += "" if args.max_guidance == 5.0 else f" (clip {args.max_guidance:g})"
+    span = f"{min(seeds)}-{max(seeds)}"
+    smooth = {k: float(np.average([p["smooth"][k] for p in parts], weights=[len(p["seeds"]) for p in parts]))
+              for k in parts[0]["smooth"]}
+    cmd = (f"{COMMAND} --only curves --heads {args.head_of[label]} --strategies {strategy} --d {d} "
+           f"--episodes {args.episodes} --seed-start {args.seed_start}"
+           f"{f' --max-guidance {args.max_guidance:g} --prefix {args.prefix}' if strategy == 'rtc' else ''}")
+    note = (f"{n} held-out seeds{' (REDUCED run: the protocol is 200)' if n < 200 else ''}, sampling seed "
+            f"{args.seed}, delay d={d} control steps, strategy {strategy}"
+            f"{f', RTC guidance clip {args.max_guidance:g}, prefix {args.prefix}' if strategy == 'rtc' else ''}")
+    if task == "pusht":
+        scores = np.array([x for p in parts for x in p["max_reward"]])
+        lo, hi = bootstrap_interval(scores) if n > 1 else (scores[0], scores[0])
+        value = round(float(scores.mean()), 3)
+        record(SECTION, f"{label}, {shown}, d={d}: score", value, "", cmd, note=note,
+               interval=(min(round(lo, 3), value), max(round(hi, 3), value)), n=n, seeds=span)
+    else:
+        k = int(sum(x for p in parts for x in p["strict"]))
+        lo, hi = wilson_interval(k, n)
+        value = round(100.0 * k / n, 1)
+        record(SECTION, f"{label}, {shown}, d={d}: strict success", value, "%", cmd, note=note,
+               interval=(min(round(100 * lo, 1), value), max(round(100 * hi, 1), value)), n=n, seeds=span)
+    unit = "px" if task == "pusht" else "rad"
+    record(SECTION, f"{label}, {shown}, d={d}: smoothness",
+           f"jump at switches {smooth['switch_jump']:.1f} {unit} (other steps {smooth['other_step']:.1f}), "
+           f"max jerk {smooth['max_jerk']:.1f} {unit}/step^3", "", cmd, note=note + "; means over episodes",
+           n=n, seeds=span)
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--only", choices=["latency", "curves"], default=None, help="run one part")
+    parser.add_argument("--heads", default="dp,flow,act,act-cube", help=f"comma list of {list(HEADS)}")
+    parser.add_argument("--strategies", default=",".join(STRATEGY_NAMES), help=f"comma list of {list(STRATEGY_NAMES)}")
+    parser.add_argument("--d", default=",".join(map(str, DELAYS)), help="comma list of delays in control steps")
+    parser.add_argument("--episodes", type=int, default=200, help="held-out seeds per point (protocol: 200)")
+    parser.add_argument("--seed-start", type=int, default=100000, help="first held-out seed (protocol: 100000)")
+    parser.add_argument("--block", type=int, default=50, help="seeds per cached block (the unit of resumption)")
+    parser.add_argument("--seed", type=int, default=0, help="sampling seed (torch generator of every chunk's noise)")
+    parser.add_argument("--max-guidance", type=float, default=5.0, help="RTC's guidance clip beta (paper: 5)")
+    parser.add_argument("--prefix", choices=["guide", "replace"], default="guide",
+                        help="RTC's frozen prefix: guided (the paper) or also replaced at every step (DP inpainting)")
+    parser.add_argument("--repeats", type=int, default=7, help="latency: timed calls per head (median)")
+    parser.add_argument("--threads", type=int, default=1, help="torch threads")
+    parser.add_argument("--cache", default=os.path.join(os.environ.get("XDG_CACHE_HOME", "~/.cache"), "coursekit",
+                                                        "bench_latency"), help="where evaluated blocks are kept")
+    args = parser.parse_args(argv)
+    args.heads = _csv(args.heads, tuple(HEADS))
+    args.strategies = _csv(args.strategies, STRATEGY_NAMES)
+    args.d = _csv(args.d, None, int)
+    if any(d < 0 for d in args.d) or args.episodes < 1 or args.block < 1 or args.threads < 1:
+        raise SystemExit(f"need d >= 0, --episodes/--block/--threads >= 1; got d={args.d}, "
+                         f"episodes={args.episodes}, block={args.block}, threads={args.threads}")
+    if args.seed_start < 100000 or args.seed_start >= 200000:
+        print(f"note: seeds from {args.seed_start} are not the reported range (100000+); 200000+ is validation")
+    args.head_of = {HEADS[h][3]: h for h in HEADS}
+    import torch
+
+    torch.set_num_threads(args.threads)
+    if args.only in (None, "latency"):
+        part_latency(args)
+    if args.only in (None, "curves"):
+        part_curves(args)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,182 @@
+"""Real-time chunking (RTC; Black, Galliker and Levine 2025): the next chunk as an inpainting problem.
+
+While chunk k executes, chunk k + 1 is generated from the observation at step r and arrives at
+r + d. Its first d actions (steps r .. r + d - 1) are COMMITTED: the robot executes chunk k's
+actions there whatever the policy says. RTC generates chunk k + 1 so that it agrees with them:
+during denoising (DDIM) or flow integration (Euler) each iterate x is pulled toward the target
+Y (chunk k's actions for the same steps) with soft weights W over the overlap::
+
+    j (step r + j):   0 ... d-1 | d ......................... L-1 | L ... Tp-1
+    W_j:              1 (frozen) | c_j (e^c_j - 1) / (e - 1)       | 0 (free)
+                                   c_j = (L - j) / (L - d + 1), decaying from ~1 to ~0
+
+where L is how far chunk k reaches past r (RTC paper, eq. 5, with H - s = L). Guidance follows
+pseudo-inverse guided diffusion (PiGDM, Song et al. 2023): estimate the clean chunk x0_hat(x)
+from the current iterate, and add the vector-Jacobian product
+
+    g = (d x0_hat / d x)^T  W (Y - x0_hat)          (through the network, by autograd)
+
+to the update, with a guidance weight clipped at beta = 5 (RTC's choice). How g enters the
+update and the weight before clipping depend on the sampler (coursekit.policies.inpainting:
+DDIM on epsilon, Euler on velocity); this module holds what both share: the weights, the VJP,
+the sampling loop over a ``GuidedHead``, and the executor.
+
+Deliberate choices: the frozen prefix is ALSO copied verbatim into the returned chunk (those
+actions are executed from the old chunk anyway, so the chunk says what really happens); with
+d = 0 nothing is committed and, by default, the chunk is sampled without guidance, so RTC at
+d = 0 is exactly receding-horizon execution (``guide_without_delay=True`` keeps the soft part).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any, Protocol
+
+import numpy as np
+
+from coursekit.execution.delay import AsyncChunking, _to_numpy
+from coursekit.execution.receding import stack_history
+
+MAX_GUIDANCE = 5.0
+"""beta: RTC clips the guidance weight at 5."""
+WEIGHT_SCHEDULES = ("exp", "hard")
+
+
+def rtc_weights(n: int, delay: int, overlap: int, schedule: str = "exp") -> np.ndarray:
+    """Guidance weights W (n,) over the steps r .. r + n - 1 of the next chunk.
+
+    Args:
+        n: number of weights (target steps).
+        delay: d, steps frozen to the committed actions (W = 1).
+        overlap: L, steps the previous chunk still covers from r (the soft region is d <= j < L).
+        schedule: "exp" (RTC's exponential decay) or "hard" (frozen prefix only; the ablation
+            the paper says jumps at the switch).
+    """
+    for name, v in (("n", n), ("delay", delay), ("overlap", overlap)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+            raise ValueError(f"{name} must be an integer >= 0, got {v!r}")
+    if schedule not in WEIGHT_SCHEDULES:
+        raise ValueError(f"schedule must be one of {WEIGHT_SCHEDULES}, got {schedule!r}")
+    w = np.zeros(n)
+    j = np.arange(n)
+    w[j < delay] = 1.0
+    if schedule == "exp":
+        soft = (j >= delay) & (j < overlap)
+        c = (overlap - j[soft]) / (overlap - delay + 1.0)
+        w[soft] = c * np.expm1(c) / (math.e - 1.0)
+    return w
+
+
+def guidance_vjp(clean_fn: Callable[[Any], tuple[Any, Any]], x: Any, target: Any, weights: Any) -> tuple[Any, Any, Any]:
+    """x0_hat, the model's output, and g = (d x0_hat / d x)^T [W (Y - x0_hat)], all (B, Tp, Da).
+
+    ``clean_fn(x) -> (x0_hat, model_output)`` must be differentiable in x; ``target`` Y (B, Tp, Da)
+    and ``weights`` W (Tp,) (zero where there is no target). Returns detached tensors.
+    """
+    import torch
+
+    with torch.enable_grad():
+        x = x.detach().requires_grad_(True)
+        x0_hat, out = clean_fn(x)
+        err = (target - x0_hat.detach()) * weights.view(1, -1, 1)  # (B, Tp, Da), W (Y - x0_hat)
+        (g,) = torch.autograd.grad(x0_hat, x, grad_outputs=err)  # J^T err, one backward pass
+    return x0_hat.detach(), out.detach(), g
+
+
+class GuidedHead(Protocol):
+    """A sampler seen one step at a time: what DDIM (diffusion) and Euler (flow) both provide."""
+
+    num_steps: int
+    """Network calls from noise to a chunk."""
+
+    def clean(self, x: Any, k: int) -> tuple[Any, Any]:
+        """Step k: the clean-chunk estimate x0_hat(x) (B, Tp, Da) and the model output (eps or v)."""
+
+    def step(self, x: Any, k: int, model_out: Any, g: Any, max_guidance: float) -> Any:
+        """Step k: the next iterate from x, the model output and the guidance VJP g (zero: unguided)."""
+
+    def noised(self, clean: Any, noise: Any, k: int) -> Any:
+        """A clean chunk carried to the noise level after step k along ``noise`` (for ``replace``)."""
+
+
+def sample_guided(head: GuidedHead, x: Any, target: Any, weights: Any, max_guidance: float = MAX_GUIDANCE,
+                  replace: Any = None) -> Any:
+    """Run ``head`` from noise ``x`` (B, Tp, Da) to a chunk, guided toward ``target`` with ``weights``.
+
+    All-zero weights skip the backward pass: the result is then the plain sampler's, bit for bit.
+    ``replace`` (Tp,) bool, optional: after every step those indices of the iterate are overwritten
+    by ``head.noised(target, x_start, k)``, the target carried to the step's noise level along its
+    own noise (Diffusion Policy's inpainting, Chi et al. 2023; a departure from RTC, which only
+    guides; off by default).
+    """
+    import torch
+
+    guided = bool((weights != 0).any())
+    x_start = x
+    for k in range(head.num_steps):
+        if guided:
+            _, out, g = guidance_vjp(lambda z: head.clean(z, k), x, target, weights)
+        else:
+            with torch.no_grad():
+                _, out = head.clean(x, k)
+            g = None
+        with torch.no_grad():
+            x = head.step(x, k, out, g, max_guidance)
+            if replace is not None and bool(replace.any()):
+                x = torch.where(replace.view(1, -1, 1), head.noised(target, x_start, k), x)
+    return x
+
+
+class RealTimeChunking(AsyncChunking):
+    """Asynchronous execution whose next chunk is inpainted onto the committed actions (RTC).
+
+    Same schedule as :class:`~coursekit.execution.delay.AsyncChunking`; at each request after the
+    first, the target Y is the current chunk's actions for steps r, r + 1, ... (held past its
+    end), the weights come from :func:`rtc_weights`, and ``predict_inpainted(obs_history,
+    target (B, n, Da), weights (n,), frozen=d) -> (B, Tp, Da)`` generates the chunk (index
+    ``start + j`` of the chunk is aligned with ``target[:, j]``). Its first d actions are then set
+    to the committed ones exactly.
+
+    Args (besides DelayedExecutor's):
+        predict_inpainted: the guided predictor (coursekit.policies.inpainting.predict_inpainted
+            bound to a policy); required.
+        schedule: "exp" (RTC) or "hard" (frozen prefix only).
+        guide_without_delay: guide with the soft weights also when d = 0 (default False: d = 0
+            is plain receding horizon).
+    """
+
+    def __init__(self, predict_chunk: Callable[[Any], Any], n_obs_steps: int = 2, n_action_steps: int = 8,
+                 delay: int = 0, start: int | None = None, predict_inpainted: Callable[..., Any] | None = None,
+                 schedule: str = "exp", guide_without_delay: bool = False) -> None:
+        super().__init__(predict_chunk, n_obs_steps, n_action_steps, delay, start)
+        if not callable(predict_inpainted):
+            raise ValueError("RealTimeChunking needs predict_inpainted(obs_history, target, weights, frozen=d) "
+                             f"(a diffusion or flow policy's guided sampler), got {predict_inpainted!r}")
+        if schedule not in WEIGHT_SCHEDULES:
+            raise ValueError(f"schedule must be one of {WEIGHT_SCHEDULES}, got {schedule!r}")
+        self.predict_inpainted = predict_inpainted
+        self.schedule = schedule
+        self.guide_without_delay = bool(guide_without_delay)
+
+    def _compute(self) -> Any:
+        cur, d, r = self.current, self.delay, self.t
+        if cur is None or (d == 0 and not self.guide_without_delay):
+            return super()._compute()
+        overlap = max(0, cur.request + cur.length - r)  # steps r .. r + overlap - 1 the current chunk covers
+        n = max(d, overlap)
+        target = np.stack([_to_numpy(cur.action_at(r + j)) for j in range(n)], axis=1)  # (B, n, Da)
+        weights = rtc_weights(n, d, overlap, self.schedule)  # (n,)
+        chunk = self.predict_inpainted(stack_history(self.history), target, weights, frozen=d)
+        shape = tuple(getattr(chunk, "shape", ()))
+        if len(shape) != 3 or shape[0] != target.shape[0] or shape[1] < self.start + d:
+            raise ValueError(f"predict_inpainted returned shape {shape}; expected (B={target.shape[0]}, "
+                             f"Tp >= start + d = {self.start + d}, Da)")
+        committed = target[:, :d]  # (B, d, Da): what the robot executes while this chunk is computed
+        if hasattr(chunk, "detach"):
+            chunk = chunk.clone()
+            chunk[:, self.start:self.start + d] = chunk.new_tensor(committed)
+        else:
+            chunk = np.array(chunk, copy=True)
+            chunk[:, self.start:self.start + d] = committed
+        return chunk

@@ -1,0 +1,220 @@
+"""Real-time chunking: the weights' equation, the PiGDM gradient against torch's Jacobian, the guided heads
+against the unguided samplers, and the committed prefix on a real PushT rollout."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+import coursekit
+from coursekit.data import MinMaxNormalizer
+from coursekit.data.features import get_features
+from coursekit.envs.pusht import PushTEnv
+from coursekit.evaluate import rollout
+from coursekit.execution.rtc import RealTimeChunking, guidance_vjp, rtc_weights, sample_guided
+from coursekit.nn.unet1d import UNet1DConfig
+from coursekit.policies.diffusion import DiffusionPolicy, DiffusionPolicyConfig
+from coursekit.policies.inpainting import EulerHead, predict_inpainted
+
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+CKPT = Path(coursekit.__file__).parent / "checkpoints"
+TINY = UNet1DConfig(down_dims=(16, 32), kernel_size=3, n_groups=4, diffusion_step_embed_dim=16)
+
+
+def tiny_dp(steps: int = 3) -> DiffusionPolicy:
+    torch.manual_seed(0)
+    return DiffusionPolicy(DiffusionPolicyConfig(unet=TINY, num_inference_steps=steps),
+                           {"obs": MinMaxNormalizer(np.array([0, 0, 0, 0, -1, -1.0]), np.array([512, 512, 512, 512, 1, 1.0])),
+                            "action": MinMaxNormalizer(np.zeros(2), np.full(2, 512.0))})
+
+
+@pytest.fixture(scope="module")
+def dp():
+    from coursekit.checkpoint import load_checkpoint
+
+    return load_checkpoint(CKPT / "pusht_diffusion_state", device="cpu")
+
+
+def test_weights_follow_the_rtc_equation():
+    n, d, L = 12, 3, 9
+    w = rtc_weights(n, d, L)
+    for j in range(n):  # Black et al. 2025, eq. 5 with H - s = L
+        if j < d:
+            ref = 1.0
+        elif j < L:
+            c = (L - j) / (L - d + 1)
+            ref = c * (math.exp(c) - 1) / (math.e - 1)
+        else:
+            ref = 0.0
+        assert w[j] == pytest.approx(ref, abs=1e-12), f"W_{j}"
+    assert np.all(np.diff(w[d:L]) < 0) and 0 < w[L - 1] < w[d] < 1
+    np.testing.assert_array_equal(rtc_weights(n, d, L, "hard"), (np.arange(n) < d).astype(float))
+    np.testing.assert_array_equal(rtc_weights(5, 4, 2), [1, 1, 1, 1, 0])  # overlap shorter than d: frozen only
+    with pytest.raises(ValueError, match="schedule"):
+        rtc_weights(4, 1, 2, "linear")
+
+
+def test_guidance_vjp_is_jacobian_transpose_times_weighted_error():
+    torch.manual_seed(1)
+    lin = torch.nn.Linear(6, 6)
+
+    def clean(x):  # a nonlinear "clean estimate" of x (1, 3, 2)
+        out = torch.tanh(lin(x.reshape(1, 6))).reshape(1, 3, 2)
+        return out, out * 2
+
+    x, y = torch.randn(1, 3, 2), torch.randn(1, 3, 2)
+    w = torch.tensor([1.0, 0.5, 0.0])
+    x0, out, g = guidance_vjp(clean, x, y, w)
+    jac = torch.autograd.functional.jacobian(lambda z: clean(z)[0], x).reshape(6, 6)  # d x0 / d x
+    err = ((y - x0) * w.view(1, -1, 1)).reshape(6)
+    torch.testing.assert_close(g.reshape(6), jac.T @ err)
+    torch.testing.assert_close(out, 2 * x0)
+
+
+@pytest.mark.parametrize("sampler,steps", [("ddim", 3), ("ddpm", 4)])
+def test_unguided_diffusion_head_is_predict_chunk(sampler, steps):
+    policy = tiny_dp()
+    obs = np.random.default_rng(0).uniform(0, 500, size=(3, 2, 6)).astype(np.float32)
+    ref = policy.predict_chunk(obs, sampler=sampler, num_inference_steps=steps, generator=torch.Generator().manual_seed(5))
+    got = predict_inpainted(policy, obs, np.zeros((3, 4, 2)), np.zeros(4), sampler=sampler, num_inference_steps=steps,
+                            generator=torch.Generator().manual_seed(5))
+    np.testing.assert_array_equal(got, ref)
+
+
+class ToyFlow(torch.nn.Module):
+    """A flow 'policy' head with random weights: v(x, t, cond) from the DP U-Net at time 100 t."""
+
+    def __init__(self):
+        super().__init__()
+        torch.manual_seed(2)
+        self.unet = tiny_dp().unet
+
+    def velocity(self, x, t, cond):
+        return self.unet(x, t * 100.0, cond)
+
+
+def test_unguided_euler_head_is_plain_euler():
+    flow, cond, x1 = ToyFlow(), torch.randn(2, 12), torch.randn(2, 16, 2)
+    with torch.no_grad():
+        x, n = x1.clone(), 4
+        for i in range(n):  # x_{t+dt} = x_t + dt v(x_t, t), t = 1 - i/n, dt = -1/n
+            x = x + (-1.0 / n) * flow.velocity(x, torch.full((2,), 1.0 - i / n), cond)
+    got = sample_guided(EulerHead(flow.velocity, cond, n), x1, torch.zeros(2, 16, 2), torch.zeros(16))
+    torch.testing.assert_close(got, x, rtol=0, atol=0)
+
+
+def test_euler_guidance_weight_is_rtc_weight_in_pi0_time():
+    for t in (0.9, 0.5, 0.2, 0.05):
+        tau = 1.0 - t  # the paper's time: 0 noise, 1 data
+        r2 = (1 - tau) ** 2 / (tau ** 2 + (1 - tau) ** 2)
+        assert EulerHead.guidance_weight(t, 1e9) == pytest.approx((1 - tau) / (tau * r2))
+        assert EulerHead.guidance_weight(t, 5.0) == pytest.approx(min(5.0, (1 - tau) / (tau * r2)))
+    assert EulerHead.guidance_weight(1.0, 5.0) == 5.0
+
+
+def test_ddim_guidance_is_pigdm_unclipped_and_rtc_clipped():
+    from coursekit.policies.inpainting import DDIMHead
+
+    for abar in (0.02, 0.5, 0.9, 0.999):
+        # PiGDM: score += g / r^2 with r^2 = 1 - abar, and eps = -sqrt(1 - abar) score -> eps -= g / sqrt(1 - abar)
+        assert DDIMHead.guidance_scale(abar, 1e9) == pytest.approx(1 / math.sqrt(1 - abar))
+        tau = math.sqrt(abar) / (math.sqrt(abar) + math.sqrt(1 - abar))  # the rescaled flow time
+        r2 = (1 - tau) ** 2 / (tau ** 2 + (1 - tau) ** 2)
+        assert DDIMHead.guidance_scale(abar, 5.0) == pytest.approx(math.sqrt(abar) * min(5.0, (1 - tau) / (tau * r2)))
+
+
+@pytest.mark.parametrize("head", ["diffusion", "flow"])
+def test_guidance_pulls_the_overlap_toward_the_target(dp, head):
+    obs = np.random.default_rng(3).uniform(100, 400, size=(4, 2, dp.config.obs_dim)).astype(np.float32)
+    target = np.random.default_rng(4).uniform(100, 400, size=(4, 1, 2)).repeat(8, axis=1)  # (B, 8, Da)
+    w = rtc_weights(8, 3, 8)
+    if head == "diffusion":
+        policy, kw = dp, {}
+    else:  # the shipped DP's U-Net read as a (random-ish) velocity field: guidance must still pull
+        policy, kw = FlowFromDP(dp), {}
+    free = predict_inpainted(policy, obs, target, np.zeros(8), generator=torch.Generator().manual_seed(0), **kw)
+    guided = predict_inpainted(policy, obs, target, w, frozen=3, generator=torch.Generator().manual_seed(0), **kw)
+    err = lambda c: float((w[None, :, None] * (c[:, 1:9] - target) ** 2).sum())  # noqa: E731
+    assert err(guided) < 0.5 * err(free), (err(guided), err(free))
+    np.testing.assert_array_equal(guided[:, 1:4], target[:, :3].astype(guided.dtype))  # frozen prefix, exactly
+
+
+class FlowFromDP(torch.nn.Module):
+    """A 'flow' policy sharing a DP's observation encoding and U-Net (enough to exercise the Euler head)."""
+
+    policy_type = "flow"
+
+    def __init__(self, dp):
+        super().__init__()
+        self.dp = dp
+        self.config = type("C", (), {**vars(dp.config), "integration_method": "euler", "num_inference_steps": 5})()
+        self.normalizers = dp.normalizers
+        self._require_normalizers, self._obs_dict, self.encode_obs, self._finish = (
+            dp._require_normalizers, dp._obs_dict, dp.encode_obs, dp._finish)
+
+    def velocity(self, x, t, cond):
+        return self.dp.unet(x, t * 100.0, cond)
+
+
+def test_flow_policy_unguided_head_is_its_predict_chunk():
+    flow_mod = pytest.importorskip("coursekit.policies.flow")
+    torch.manual_seed(0)
+    policy = flow_mod.FlowMatchingPolicy(flow_mod.FlowMatchingPolicyConfig(unet=TINY, num_inference_steps=3),
+                                         {"obs": MinMaxNormalizer(np.zeros(6), np.full(6, 512.0)),
+                                          "action": MinMaxNormalizer(np.zeros(2), np.full(2, 512.0))})
+    obs = np.random.default_rng(0).uniform(0, 500, size=(2, 2, 6)).astype(np.float32)
+    ref = policy.predict_chunk(obs, generator=torch.Generator().manual_seed(9))
+    got = predict_inpainted(policy, obs, np.zeros((2, 3, 2)), np.zeros(3), generator=torch.Generator().manual_seed(9))
+    np.testing.assert_array_equal(got, ref)
+
+
+def test_rtc_committed_prefix_equals_previous_chunk_on_pusht(dp):
+    c, d = dp.config, 3
+    gen = torch.Generator().manual_seed(0)
+    features = get_features(c.features)
+    pairs = []
+
+    class Logged(RealTimeChunking):
+        def _request(self):
+            prev = self.current
+            super()._request()
+            if prev is not None:
+                pairs.append((prev, self.pending))
+
+    def factory(pc):
+        return Logged(pc, c.n_obs_steps, c.n_action_steps, delay=d,
+                      predict_inpainted=lambda h, y, w, frozen: predict_inpainted(dp, h, y, w, frozen=frozen, generator=gen))
+
+    res = rollout(lambda h: dp.predict_chunk(h, generator=gen), lambda: PushTEnv(max_episode_steps=30),
+                  lambda obs: features(np.stack(obs)), [100000, 100001], factory, max_steps=30, progress=False, record=True)
+    assert len(pairs) >= 3
+    for prev, new in pairs:
+        committed = np.stack([prev.action_at(new.request + j) for j in range(d)], axis=1)  # (B, d, Da)
+        np.testing.assert_array_equal(new.actions[:, :d], committed)
+    assert np.isfinite(res.actions).all()
+
+
+def test_replace_prefix_carries_the_target_along_its_own_noise():
+    from coursekit.diffusion import DDIMSampler
+    from coursekit.policies.inpainting import DDIMHead
+
+    policy = tiny_dp()
+    y, e = torch.randn(1, 16, 2), torch.randn(1, 16, 2)
+    ddim = DDIMHead(policy.unet, DDIMSampler(policy.schedule, 4), torch.zeros(1, 12))
+    abar = policy.schedule.alphas_cumprod[ddim.timesteps[0] - ddim.sampler.step_ratio]
+    torch.testing.assert_close(ddim.noised(y, e, 0), abar.sqrt() * y + (1 - abar).sqrt() * e)
+    torch.testing.assert_close(ddim.noised(y, e, ddim.num_steps - 1), y)  # past the last step: clean
+    euler = EulerHead(ToyFlow().velocity, torch.zeros(1, 12), 4)
+    torch.testing.assert_close(euler.noised(y, e, 0), 0.75 * e + 0.25 * y)
+    torch.testing.assert_close(euler.noised(y, e, 3), y)
+    obs = np.random.default_rng(0).uniform(0, 500, size=(2, 2, 6)).astype(np.float32)
+    target = np.random.default_rng(1).uniform(0, 500, size=(2, 5, 2))
+    out = predict_inpainted(policy, obs, target, rtc_weights(5, 2, 5), frozen=2, prefix="replace",
+                            generator=torch.Generator().manual_seed(0))
+    np.testing.assert_array_equal(out[:, 1:3], target[:, :2].astype(out.dtype))
+    with pytest.raises(ValueError, match="prefix"):
+        predict_inpainted(policy, obs, target, np.zeros(5), prefix="paste")
