@@ -3,7 +3,7 @@
     .venv/bin/python -m benchmarks.bench_smoothness --episodes 20 --threads 1
     .venv/bin/python -m benchmarks.bench_smoothness --episodes 2 --no-record      # smoke run
 
-Zhao et al. (2023, Sec. III-B) introduce temporal ensembling to avoid the jerky motion of
+Zhao et al. (2023, Sec. IV-A) introduce temporal ensembling to avoid the jerky motion of
 executing chunks open loop (a jump every k steps, where one chunk hands over to the next).
 The shipped ACT (``coursekit/checkpoints/act_transfer_cube``, k = 100, one training seed) runs
 the same held-out episodes (seeds from ``--seed-start``, 400 steps at 50 Hz) with:

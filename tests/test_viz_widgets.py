@@ -1,6 +1,6 @@
 """The scrub widgets: each control redraws its figure in place, from the right numbers.
 
-References: the ensembling replay against the defining weighted average of ACT (Sec. III-B,
+References: the ensembling replay against the defining weighted average of ACT (Sec. IV-A,
 w_i = exp(-m i), oldest first) computed directly; the chunk replay against the executor's
 contract (a chunk every Ta steps, its rows To-1 ... To-1+Ta-1 executed).
 """
@@ -111,3 +111,26 @@ def test_cvae_scrubber_decodes_the_chosen_z():
     second = bytes(s.image.value)
     s.controls["beta"].value = 0.01
     assert s.redraws == 3 and first != second != bytes(s.image.value)
+
+
+def test_delay_scrubber_follows_the_delayed_executors():
+    from coursekit.viz.widgets_delay import delay_scrubber, play_delay
+
+    # d = 0: synchronous and naive async are both plain receding horizon (a chunk every Ta = 4)
+    sync0, sw0 = play_delay("synchronous", 0, steps=12)
+    async0, _ = play_delay("naive async", 0, steps=12)
+    np.testing.assert_array_equal(sync0, async0)
+    assert sw0 == [0, 4, 8]
+    # chunk k from step r says r + j + (-1)^k 0.5: chunk 0 plays 0.5, 1.5, 2.5, 3.5, then at d = 2 ...
+    sync2, sw_sync = play_delay("synchronous", 2, steps=10)
+    np.testing.assert_allclose(sync2, [0.5, 1.5, 2.5, 3.5, 3.5, 3.5, 3.5, 4.5, 5.5, 6.5])  # holds 2 steps, lags
+    assert sw_sync == [0, 6]
+    async2, sw_async = play_delay("naive async", 2, steps=8)
+    np.testing.assert_allclose(async2, [0.5, 1.5, 2.5, 3.5, 4.5, 5.5, 5.5, 6.5])  # no pause; chunk 1 from t = 6
+    assert sw_async == [0, 6]
+    s = delay_scrubber(max_delay=6)
+    first = bytes(s.image.value)
+    s.controls["d"].value = 5
+    assert s.redraws == 2 and bytes(s.image.value) != first
+    with pytest.raises(ValueError, match="strategy"):
+        play_delay("rtc", 1)

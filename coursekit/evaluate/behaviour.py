@@ -6,7 +6,7 @@
   the T does not move either. Pushing (the T moves) and travelling (the pusher moves) do not count.
 - :func:`rms_jerk`: the root-mean-square third difference of an executed action trajectory,
   a_{t+1} - 3 a_t + 3 a_{t-1} - a_{t-2} (units of the action per step^3): the smoothness figure
-  of temporal ensembling (Zhao et al. 2023, Sec. III-B says ensembling gives smooth motion;
+  of temporal ensembling (Zhao et al. 2023, Sec. IV-A says ensembling gives smooth motion;
   this puts a number on it).
 
 Both read the arrays :class:`~coursekit.evaluate.result.EvalResult` records (``record=True``).

@@ -11,7 +11,7 @@ name below pulls its module (and that module's heavy imports) on first use.
     MetricsLog, plot_metrics            a training run's metrics.csv and loss.png      (run_log)
     EpisodeRecording, write_replay      evaluated episodes as an HTML replay + frames  (replay)
     TeleopWidget                        push the T with the mouse, recorded            (teleop_widget)
-    FigureScrubber                      sliders that redraw one figure in place        (widgets, widgets_chunks)
+    FigureScrubber                      sliders that redraw one figure in place        (widgets, widgets_chunks, widgets_delay)
 """
 
 from __future__ import annotations
@@ -35,6 +35,7 @@ _LAZY = {
     "write_replay": "coursekit.viz.replay",
     "TeleopWidget": "coursekit.viz.teleop_widget",
     "FigureScrubber": "coursekit.viz.widgets",
+    "delay_scrubber": "coursekit.viz.widgets_delay",
 }
 __all__ = sorted(_LAZY)
 __getattr__, __dir__ = lazy_loader(__name__, _LAZY, submodules=True)
