@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import warnings
 
 import pytest
 
@@ -21,3 +22,17 @@ def one_torch_thread():
     torch.set_num_threads(1)
     yield
     torch.set_num_threads(n)
+
+
+@pytest.fixture(scope="module")
+def chromium(request):
+    """Path of Debian's headless chromium; without it the requesting module's browser tests skip, loudly."""
+    from coursekit.viz.browser import find_chromium
+
+    path = find_chromium()
+    if path is None:
+        reason = (f"!!! HEADLESS CHROMIUM IS NOT INSTALLED: the real-browser tests of {request.module.__name__} are "
+                  "SKIPPED. Install it with `apt-get install -y chromium` (`make test` does this as root). !!!")
+        warnings.warn(reason, stacklevel=1)
+        pytest.skip(reason)
+    return path

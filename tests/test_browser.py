@@ -9,7 +9,6 @@ model's rgba); Lambert shading keeps lit top faces close to them.
 from __future__ import annotations
 
 import os
-import warnings
 
 import numpy as np
 import pytest
@@ -19,20 +18,10 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 pytest.importorskip("meshcat")
 from PIL import Image  # noqa: E402
 
-from coursekit.viz.browser import find_chromium, screenshot_html  # noqa: E402
+from coursekit.viz.browser import screenshot_html  # noqa: E402
 
 pytestmark = pytest.mark.browser
 
-
-@pytest.fixture(scope="module")
-def chromium():
-    path = find_chromium()
-    if path is None:
-        reason = ("!!! HEADLESS CHROMIUM IS NOT INSTALLED: the real-browser tests of the meshcat exports are "
-                  "SKIPPED. Install it with `apt-get install -y chromium` (`make test` does this as root). !!!")
-        warnings.warn(reason, stacklevel=1)
-        pytest.skip(reason)
-    return path
 
 
 @pytest.fixture(scope="module")

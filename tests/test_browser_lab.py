@@ -16,12 +16,9 @@ from __future__ import annotations
 import io
 import json
 import time
-import warnings
 
 import numpy as np
 import pytest
-
-from coursekit.viz.browser import find_chromium
 
 pytestmark = pytest.mark.browser
 
@@ -31,13 +28,7 @@ RUN_ALL_TIMEOUT_S = 900  # a shared, loaded CI machine; an idle 2-core one needs
 
 
 @pytest.fixture(scope="module")
-def browser():
-    chromium = find_chromium()
-    if chromium is None:
-        reason = ("!!! HEADLESS CHROMIUM IS NOT INSTALLED: the JupyterLab browser tests are SKIPPED. Install it "
-                  "with `apt-get install -y chromium` (`make test` does this as root). !!!")
-        warnings.warn(reason, stacklevel=1)
-        pytest.skip(reason)
+def browser(chromium):
     sync_api = pytest.importorskip("playwright.sync_api")
     with sync_api.sync_playwright() as pw:
         b = pw.chromium.launch(executable_path=chromium, args=LAUNCH_ARGS)

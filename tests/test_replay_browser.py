@@ -8,7 +8,6 @@ of it loading, so a budget of 300 ms shows the first step and 5000 ms shows abou
 from __future__ import annotations
 
 import os
-import warnings
 
 import numpy as np
 import pytest
@@ -17,21 +16,11 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 pytest.importorskip("meshcat")
 from PIL import Image  # noqa: E402
 
-from coursekit.viz.browser import find_chromium, screenshot_html  # noqa: E402
+from coursekit.viz.browser import screenshot_html  # noqa: E402
 from coursekit.viz.replay import EpisodeRecording, write_replay  # noqa: E402
 
 pytestmark = pytest.mark.browser
 
-
-@pytest.fixture(scope="module")
-def chromium():
-    path = find_chromium()
-    if path is None:
-        reason = ("!!! HEADLESS CHROMIUM IS NOT INSTALLED: the real-browser tests of the evaluation replay are "
-                  "SKIPPED. Install it with `apt-get install -y chromium` (`make test` does this as root). !!!")
-        warnings.warn(reason, stacklevel=1)
-        pytest.skip(reason)
-    return path
 
 
 def shot(html, png, budget_ms: int) -> np.ndarray:
