@@ -158,13 +158,16 @@ def test_teleop_widget_records_a_mouse_drag_that_trains_and_replays(page, lab, t
     canvas = page.locator(".ck-teleop-canvas")
     canvas.scroll_into_view_if_needed()
     page.locator(".ck-teleop-start").click()
+    readout = page.locator(".ck-teleop-readout")
+    deadline = time.monotonic() + 60  # the kernel answers Start by setting "recording"; wait for it
+    while "recording" not in readout.inner_text() and time.monotonic() < deadline:
+        time.sleep(0.2)
     box = canvas.bounding_box()
     scale = box["width"] / 512.0
 
     def screen(x, y):
         return box["x"] + x * scale, box["y"] + y * scale
 
-    readout = page.locator(".ck-teleop-readout")
     # press on the pusher, then drag round below the T and push up into it, slowly enough that
     # the 10 Hz ticks see many different targets
     ax, ay = TWO_WAY_START[:2]

@@ -50,7 +50,9 @@ function render({ model, el }) {
   root.append(canvas, bar);
   el.appendChild(root);
 
-  let target = null, dragging = false, touched = false, pending = false;
+  // starting: Start was clicked and Python has not yet answered "recording": a drag that begins
+  // in that moment counts (a busy kernel would otherwise swallow it and nothing is recorded)
+  let target = null, dragging = false, touched = false, pending = false, starting = false;
   const ctx = canvas.getContext("2d");
   const poly = (pts, fill, stroke) => { ctx.beginPath();
     pts.forEach((p, i) => (i ? ctx.lineTo(p[0] * k, p[1] * k) : ctx.moveTo(p[0] * k, p[1] * k)));
@@ -75,13 +77,14 @@ function render({ model, el }) {
   }
   const world = (ev) => { const r = canvas.getBoundingClientRect();
     return [(ev.clientX - r.left) / k, (ev.clientY - r.top) / k]; };
-  canvas.addEventListener("pointerdown", (ev) => { if (!model.get("recording")) return;
+  canvas.addEventListener("pointerdown", (ev) => { if (!model.get("recording") && !starting) return;
     dragging = true; touched = true; target = world(ev); canvas.setPointerCapture?.(ev.pointerId); draw(); });
   canvas.addEventListener("pointermove", (ev) => { if (dragging) { target = world(ev); draw(); } });
   const release = () => { dragging = false; };
   canvas.addEventListener("pointerup", release);
   canvas.addEventListener("pointercancel", release);
-  start.addEventListener("click", () => { touched = false; target = null; pending = false; model.send({ event: "start" }); });
+  start.addEventListener("click", () => { touched = false; target = null; pending = false; starting = true;
+    model.send({ event: "start" }); });
   stop.addEventListener("click", () => model.send({ event: "stop" }));
   discard.addEventListener("click", () => model.send({ event: "discard" }));
   const timer = setInterval(() => {
@@ -90,7 +93,8 @@ function render({ model, el }) {
     model.send({ event: "tick", target: target });
   }, 1000 / model.get("hz"));
   for (const name of ["n_steps", "status"]) model.on("change:" + name, () => { pending = false; });
-  model.on("change:recording", () => { pending = false; if (!model.get("recording")) { touched = false; } draw(); });
+  model.on("change:recording", () => { pending = false; starting = false;
+    if (!model.get("recording")) { touched = false; } draw(); });
   for (const name of ["agent", "block_outline", "coverage", "n_kept", "status"]) model.on("change:" + name, draw);
   draw();
   return () => clearInterval(timer);
