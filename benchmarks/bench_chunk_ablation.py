@@ -18,7 +18,11 @@ Parts:
   and features (``pusht_keypoints``), the same budget (``--minutes`` or ``--steps``, the "cpu"
   recipe, one thread), each with every seed of ``--train-seeds``; evaluated on the same seeds.
   A row per variant: the mean score over training seeds, a t-interval over training seeds
-  (95 %; with 3 seeds it is wide on purpose), and the per-seed scores in the note.
+  (95 %; with 3 seeds it is wide on purpose), and the per-seed scores in the note. The same
+  split by start (``benchmarks/two_way_starts.json``: is the expert's first decision a two-way
+  coin toss?) gives each variant's score on the two-way and the other starts, and Diffusion
+  Policy's lead over each regression variant on both subsets, paired by training seed (the
+  chapter-1 question: is the gap larger where the demonstrations split?).
 
 Per-episode results go under ``--out`` (resumable: an existing run or evaluation is reused).
 """
@@ -34,7 +38,8 @@ import numpy as np
 
 SECTION = "Chunk ablation (PushT)"
 ROOT = Path(__file__).resolve().parent.parent
-DATA = Path("/work/data/pusht_400_noise0-5.npz")
+DATA = ROOT / "outputs" / "data" / "pusht_400ep_seed0_noise0-5.npz"
+"""What ``coursekit collect pusht --episodes 400 --seed 0 --action-noise 0,5`` writes: the shipped models' data."""
 VARIANTS = {
     "single-step regression (To=1, Tp=Ta=1)": ("regression", {"n_obs_steps": 1, "horizon": 1, "n_action_steps": 1,
                                                                "unet": {"down_dims": (256,)}}, {}),
@@ -93,48 +98,84 @@ def part_ta(args, seeds: list[int], rec) -> None:
             f"training seed; {saved['seconds']:.0f} s to evaluate")
 
 
-def part_train(args, seeds: list[int], rec) -> None:
-    import torch
+def _t_estimate(values: list[float]) -> tuple[float, float, float]:
+    """(mean, lo, hi): 95 % t-interval over training seeds (lo = hi = mean for one seed)."""
     from scipy import stats as sps
 
+    k, mean = len(values), float(np.mean(values))
+    if k < 2:
+        return mean, mean, mean
+    half = float(sps.t.ppf(0.975, k - 1) * np.std(values, ddof=1) / np.sqrt(k))
+    return mean, mean - half, mean + half
+
+
+def train_or_load(name: str, ts: int, args, dataset):
+    """The variant ``name`` trained with training seed ``ts`` (or loaded from ``--out``): (policy, run dir)."""
+    import torch
+
     from coursekit.checkpoint import CheckpointSaver, load_checkpoint
-    from coursekit.data.episodes import EpisodeDataset
     from coursekit.nn.unet1d import UNet1DConfig
     from coursekit.policies import make_policy
     from coursekit.train import TrainConfig, train
 
-    dataset = EpisodeDataset.load(args.data)
+    kind, fields, _ = VARIANTS[name]
     budget = {"max_steps": args.steps} if args.steps else {"minutes": args.minutes}
-    for name, (kind, fields, sampling) in VARIANTS.items():
+    slug = re.sub(r"[^a-z0-9]+", "-", name.lower()).strip("-")
+    run = args.out / f"{slug}_seed{ts}_{'s' + str(args.steps) if args.steps else f'{args.minutes:g}min'}"
+    if (run / "config.json").exists():
+        return load_checkpoint(run, device="cpu"), run
+    cfg = dict(fields)
+    if "unet" in cfg:
+        cfg["unet"] = UNet1DConfig(**cfg["unet"])
+    policy, batches, recipe = make_policy(kind, dataset, features="pusht_keypoints", recipe="cpu", seed=ts, **cfg)
+    torch.manual_seed(ts)
+    train(policy, batches, TrainConfig(**{**recipe, **budget, "seed": ts, "num_threads": args.threads,
+                                          "progress": False, "checkpoint_every_minutes": None}),
+          callbacks=[CheckpointSaver(run, dataset_meta=dataset.meta)])
+    return policy, run
+
+
+def part_train(args, seeds: list[int], rec) -> None:
+    from benchmarks.bench_claims import two_way_flags
+    from coursekit.data.episodes import EpisodeDataset
+
+    dataset = EpisodeDataset.load(args.data)
+    flags = two_way_flags(seeds, write=False)
+    two = np.array([flags[s]["two_way"] for s in seeds])  # (n,) bool
+    subsets = {"all starts": np.ones_like(two), "two-way starts": two, "other starts": ~two}
+    conditions = (f"{args.data.name}, pusht_keypoints, recipe cpu, budget "
+                  f"{f'{args.steps} steps' if args.steps else f'{args.minutes:g} min'}, {args.threads} thread(s)")
+    rewards: dict[str, np.ndarray] = {}  # variant -> (training seeds, n) max reward
+    for name, (_, _, sampling) in VARIANTS.items():
         if args.variants and not any(v in name for v in args.variants):
             continue
-        scores = []
+        per_seed = []
         for ts in args.train_seeds:
-            slug = re.sub(r"[^a-z0-9]+", "-", name.lower()).strip("-")
-            tag = f"{slug}_seed{ts}_{'s' + str(args.steps) if args.steps else f'{args.minutes:g}min'}"
-            run = args.out / tag
-            if (run / "config.json").exists():
-                policy = load_checkpoint(run, device="cpu")
-            else:
-                cfg = dict(fields)
-                if "unet" in cfg:
-                    cfg["unet"] = UNet1DConfig(**cfg["unet"])
-                policy, batches, recipe = make_policy(kind, dataset, features="pusht_keypoints", recipe="cpu", seed=ts,
-                                                      **cfg)
-                torch.manual_seed(ts)
-                train(policy, batches, TrainConfig(**{**recipe, **budget, "seed": ts, "num_threads": args.threads,
-                                                      "progress": False, "checkpoint_every_minutes": None}),
-                      callbacks=[CheckpointSaver(run, dataset_meta=dataset.meta)])
+            policy, run = train_or_load(name, ts, args, dataset)
             saved = evaluate_saved(policy, run / f"eval_{seeds[0]}_{len(seeds)}.json", seeds, dataset.meta, sampling)
-            scores.append(float(np.mean(saved["max_reward"])))
-            print(f"{name}, training seed {ts}: score {scores[-1]:.3f}", flush=True)
-        k = len(scores)
-        mean, sd = float(np.mean(scores)), float(np.std(scores, ddof=1)) if k > 1 else 0.0
-        half = float(sps.t.ppf(0.975, k - 1) * sd / np.sqrt(k)) if k > 1 else 0.0
-        rec(f"{name} score, {k} training seed(s)", (mean, max(0.0, mean - half), min(1.0, mean + half), k * len(seeds)),
-            f"mean over training seeds {args.train_seeds} (per seed: {', '.join(f'{s:.3f}' for s in scores)}; "
-            f"sd {sd:.3f}); 95 % t-interval over training seeds; {args.data.name}, pusht_keypoints, recipe cpu, "
-            f"budget {budget}, {args.threads} thread(s)")
+            per_seed.append(np.asarray(saved["max_reward"], dtype=float))
+            print(f"{name}, training seed {ts}: score {per_seed[-1].mean():.3f} "
+                  f"(two-way {per_seed[-1][two].mean():.3f}, other {per_seed[-1][~two].mean():.3f})", flush=True)
+        rewards[name] = np.stack(per_seed)  # (k, n)
+        k = len(per_seed)
+        for subset, mask in subsets.items():
+            scores = [float(r[mask].mean()) for r in per_seed]
+            mean, lo, hi = _t_estimate(scores)
+            label = f"{name} score, {k} training seed(s)" + ("" if subset == "all starts" else f", {subset}")
+            rec(label, (mean, max(0.0, lo), min(1.0, hi), k * int(mask.sum())),
+                f"mean over training seeds {args.train_seeds} (per seed: {', '.join(f'{s:.3f}' for s in scores)}; "
+                f"sd {np.std(scores, ddof=1) if k > 1 else 0.0:.3f}); 95 % t-interval over training seeds; "
+                f"{int(mask.sum())} starts per seed; {conditions}")
+    dp = next((n for n in rewards if n.startswith("Diffusion Policy")), None)
+    for other in [n for n in rewards if "regression" in n and dp is not None]:
+        short = other.split(" (")[0]
+        for subset, mask in subsets.items():
+            gaps = [float(a[mask].mean() - b[mask].mean()) for a, b in zip(rewards[dp], rewards[other])]
+            mean, lo, hi = _t_estimate(gaps)
+            rec(f"DP DDIM-10 minus {short}, {len(gaps)} training seed(s), {subset}", (mean, lo, hi, len(gaps) * int(mask.sum())),
+                f"paired by training seed {args.train_seeds} (same seed for both; per seed: "
+                f"{', '.join(f'{g:+.3f}' for g in gaps)}); 95 % t-interval over training seeds; "
+                f"{int(mask.sum())} starts per seed; step-matched, {conditions}")
 
 
 def main(argv: list[str] | None = None) -> int:
