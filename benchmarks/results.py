@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import os
 import platform
+import re
 import time
 from pathlib import Path
 
@@ -19,6 +20,10 @@ ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results.json"
 README = ROOT / "README.md"
 START, END = "<!-- results:start -->", "<!-- results:end -->"
+GRID_SECTIONS = ("Latency budget",)
+"""Sections whose "<row>, <strategy>, d=<d>: <figure>" rows the README shows as one grid per figure
+(row x d) instead of one line each: the full rows, with notes and commands, stay in results.json."""
+GRID_ROW = re.compile(r"^(?P<row>.+), (?P<strategy>[^,]+), d=(?P<d>\d+): (?P<figure>[^:]+)$")
 
 
 def load() -> dict:
@@ -64,10 +69,56 @@ def _fmt(v: float | str) -> str:
     return str(v)
 
 
+def _cell(entry: dict) -> str:
+    val = f"{_fmt(entry['value'])} {entry['unit']}".strip()
+    if "interval" in entry:
+        lo, hi = entry["interval"]
+        val += f" [{_fmt(lo)}, {_fmt(hi)}]"
+    return val + (f" n={entry['n']}" if "n" in entry else "")
+
+
+def _short_smoothness(text: str) -> str:
+    """'jump at switches 9.5 px (other steps 4.8), max jerk 51.7 px/step^3' -> '9.5 / 51.7 px'."""
+    m = re.match(r"jump at switches ([\d.]+) (\w+) \(other steps (?:[\d.]+|nan)\), max jerk ([\d.]+)", str(text))
+    return f"{m.group(1)} / {m.group(3)} {m.group(2)}" if m else str(text)
+
+
+def _render_grids(entries: list[dict]) -> list[str]:
+    """One markdown grid per (section, figure): a line per "<row>, <strategy>", a column per d."""
+    grids: dict[tuple[str, str], dict] = {}
+    for e in entries:
+        m = GRID_ROW.match(e["name"])
+        g = grids.setdefault((e["section"], m["figure"]), {"cells": {}, "ds": set(), "commands": set(), "dates": set()})
+        g["cells"][(m["row"], m["strategy"], int(m["d"]))] = e
+        g["ds"].add(int(m["d"]))
+        g["commands"].add(e["command"].split(" --heads")[0])
+        g["dates"].add(e["measured"])
+    out = []
+    for (section, figure), g in sorted(grids.items()):
+        ds = sorted(g["ds"])
+        lines = sorted({(r, st) for r, st, _ in g["cells"]})
+        what = ("mean switch jump / largest jerk" if figure == "smoothness" else f"{figure} [95 % interval] n")
+        out += ["", f"**{section}: {figure} vs delay d** (cell: {what}; every cell is the row "
+                    f"\"{section}/<line>, d=<d>: {figure}\" of benchmarks/results.json, with its note and exact "
+                    f"command; made by `{'`, `'.join(sorted(g['commands']))}`; measured "
+                    f"{min(g['dates'])}{'' if len(g['dates']) == 1 else ' to ' + max(g['dates'])})", "",
+                "| line | " + " | ".join(f"d={d}" for d in ds) + " |", "|---|" + "---|" * len(ds)]
+        for r, st in lines:
+            cells = [g["cells"].get((r, st, d)) for d in ds]
+            shown = [("" if c is None else _short_smoothness(c["value"]) + (f" n={c['n']}" if "n" in c else "")
+                      if figure == "smoothness" else "" if c is None else _cell(c)) for c in cells]
+            out.append(f"| {r}, {st} | " + " | ".join(shown) + " |")
+    return out
+
+
 def render_table() -> str:
     rows = ["| section | figure | value | 95 % interval (n) | target | conditions | command |",
             "|---|---|---|---|---|---|---|"]
+    gridded = []
     for entry in sorted(load().values(), key=lambda e: (e["section"], e["name"])):
+        if entry["section"] in GRID_SECTIONS and GRID_ROW.match(entry["name"]):
+            gridded.append(entry)
+            continue
         val = f"{_fmt(entry['value'])} {entry['unit']}".strip()
         ci = ""
         if "interval" in entry:
@@ -78,7 +129,7 @@ def render_table() -> str:
         note = entry.get("note", "").replace("|", "/")
         rows.append(f"| {entry['section']} | {entry['name']} | {val} | {ci} | {entry['target']} | {note} "
                     f"(measured {entry['measured']}) | `{entry['command']}` |")
-    return "\n".join(rows)
+    return "\n".join(rows + _render_grids(gridded))
 
 
 def render_readme() -> None:

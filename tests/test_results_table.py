@@ -81,3 +81,25 @@ def test_readme_claims_cite_rows_that_hold_their_numbers():
         prose = re.sub(r"\[[^\]]+/[^\]]+\]", "", bullet)
         for quoted in _numbers(prose):
             assert _matches(quoted, values), f"{quoted} in {bullet[:60]!r}... is in none of its rows {cited}"
+
+
+def test_every_row_is_shown_in_the_readme_once(tmp_path, monkeypatch):
+    """A gridded row (e.g. "Latency budget/<head>, <strategy>, d=<d>: score") appears as its cell;
+    every other row as a line of its own; nothing in results.json is left out."""
+    monkeypatch.setattr(results, "RESULTS", tmp_path / "r.json")
+    monkeypatch.setattr(results, "README", tmp_path / "none.md")
+    results.record("Latency budget", "PushT DP, sync, d=0: score", 0.941, "", "-m benchmarks.bench_latency --heads dp",
+                   interval=(0.909, 0.97), n=200)
+    results.record("Latency budget", "PushT DP, rtc, d=4: score", 0.742, "", "-m benchmarks.bench_latency --heads dp",
+                   interval=(0.574, 0.892), n=20)
+    results.record("Latency budget", "PushT DP, sync, d=4: smoothness",
+                   "jump at switches 9.5 px (other steps 4.8), max jerk 51.7 px/step^3", "", "-m benchmarks.bench_latency")
+    results.record("Latency budget", "PushT DP: ms per chunk", 58.8, "ms", "-m benchmarks.bench_latency")
+    table = results.render_table()
+    lines = table.splitlines()
+    assert sum("ms per chunk" in line for line in lines) == 1
+    score_grid = next(i for i, line in enumerate(lines) if "score vs delay d" in line)
+    assert lines[score_grid + 2] == "| line | d=0 | d=4 |"
+    assert "| PushT DP, rtc |  | 0.742 [0.574, 0.892] n=20 |" in lines
+    assert "| PushT DP, sync | 0.941 [0.909, 0.97] n=200 |  |" in lines
+    assert "| PushT DP, sync | 9.5 / 51.7 px |" in lines
