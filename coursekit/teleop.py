@@ -288,10 +288,9 @@ def route_side(states: np.ndarray, phases: np.ndarray | None = None, min_turn: f
         end = int(pushes[0]) + 1 if len(pushes) else end
     if end < 2:
         return None
-    cog = np.array([geo.cog_world(s[2:5]) for s in states[:end]])  # (T, 2)
-    rel = states[:end, :2] - cog
-    angle = np.unwrap(np.arctan2(rel[:, 1], rel[:, 0]))
-    swept = float(angle[-1] - angle[0])  # y down: increasing atan2 angle turns clockwise on screen
+    # The T does not move before the first contact (it moves only while pushed), so its first pose
+    # holds for the whole leg: the same measure as the expert's path_sweep.
+    swept = geo.swept_angle(states[:end, :2], states[0, 2:5])
     if abs(swept) < min_turn:
         return None
     return "cw" if swept > 0 else "ccw"

@@ -142,6 +142,19 @@ def cog_world(pose) -> np.ndarray:
     return local_to_world(np.array([T_COG_LOCAL]), pose)[0]
 
 
+def swept_angle(points: np.ndarray, pose) -> float:
+    """Signed angle (rad) a path ``points`` (K >= 2, 2) (world px) turns about the centre of gravity
+    of the T at ``pose`` (x, y, angle): the sum of the angles between successive radius vectors.
+    > 0 is clockwise on screen (y points down), the expert's "cw"."""
+    p = np.asarray(points, dtype=np.float64)
+    if p.ndim != 2 or p.shape[-1] != 2 or len(p) < 2:
+        raise ValueError(f"points must be (K >= 2, 2) world coordinates, got shape {np.shape(points)}")
+    r = p - cog_world(pose)  # (K, 2)
+    u, v = r[:-1], r[1:]
+    cross = u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]  # y down: cross > 0 turns clockwise on screen
+    return float(np.arctan2(cross, (u * v).sum(-1)).sum())
+
+
 def legacy_pose(position, angle: float) -> tuple[float, float, float]:
     """Pose reached by the reference's LEGACY reset order on a body at angle 0.
 

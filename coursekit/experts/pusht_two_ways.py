@@ -24,7 +24,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from coursekit.envs import pusht_geometry as geo
-from coursekit.experts.pusht_clearance import world_to_local
 from coursekit.experts.pusht_recording import TRAVEL
 from coursekit.experts.pusht_routes import ANTICLOCKWISE, CLOCKWISE
 
@@ -52,13 +51,8 @@ class FirstDecision:
 
 def path_sweep(points: np.ndarray, block_pose) -> float:
     """Signed angle (rad) the polyline ``points`` (K, 2) (world px) turns about the T's centre of
-    gravity, in the frame of the block at ``block_pose`` (x, y, angle); > 0: clockwise on screen."""
-    p = world_to_local(np.asarray(points, dtype=np.float64), block_pose) - np.asarray(geo.T_COG_LOCAL)  # (K, 2)
-    if p.ndim != 2 or p.shape[-1] != 2 or len(p) < 2:
-        raise ValueError(f"points must be (K >= 2, 2) world coordinates, got shape {np.shape(points)}")
-    u, v = p[:-1], p[1:]
-    cross = u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]  # y down: cross > 0 turns clockwise on screen
-    return float(np.arctan2(cross, (u * v).sum(-1)).sum())
+    gravity at ``block_pose`` (x, y, angle); > 0: clockwise on screen (:func:`geo.swept_angle`)."""
+    return geo.swept_angle(points, block_pose)
 
 
 def path_side(points: np.ndarray, block_pose, min_sweep: float = MIN_SWEEP) -> str:

@@ -143,21 +143,10 @@ class DiffusionPolicy(UNetChunkPolicy):
         the config; a_T and any sampler noise come from ``generator`` (None: global generator).
         With ``return_trajectory`` also returns the denoising path (n+1, B, Tp, Da) in raw units.
         """
-        self._require_normalizers()
-        c = self.config
-        obs, unbatched = self._obs_dict(obs_history)
-        was_training = self.training
-        self.eval()  # centre crop for images; no dropout anywhere
-        try:
-            cond = self.encode_obs(obs)  # (B, cond_dim)
-            shape = (cond.shape[0], c.horizon, c.action_dim)
-            out = self.make_sampler(sampler, num_inference_steps).sample(
-                self.unet, shape, cond=cond, generator=generator, device=cond.device,
-                return_trajectory=return_trajectory)
-        finally:
-            self.train(was_training)
-        if return_trajectory:
-            chunk_n, traj_n = out
-            traj = self.normalizers["action"].unnormalize(traj_n)  # (n+1, B, Tp, Da)
-            return self._finish(chunk_n, obs_history, unbatched), traj
-        return self._finish(out, obs_history, unbatched)
+        sampler_obj = self.make_sampler(sampler, num_inference_steps)
+
+        def draw(cond: torch.Tensor, shape: tuple[int, int, int]) -> Any:
+            return sampler_obj.sample(self.unet, shape, cond=cond, generator=generator, device=cond.device,
+                                      return_trajectory=return_trajectory)
+
+        return self._sample_chunk(obs_history, draw, return_trajectory)

@@ -101,29 +101,20 @@ class FlowMatchingPolicy(UNetChunkPolicy):
         (None: global generator). ``step_fn`` replaces the integration step (e.g. a student's
         ``euler_step``). With ``return_trajectory`` also returns the path (N+1, B, Tp, Da) in raw units.
         """
-        self._require_normalizers()
-        c = self.config
         if steps is not None and num_inference_steps is not None and steps != num_inference_steps:
             raise ValueError(f"give steps or num_inference_steps, not both ({steps} != {num_inference_steps})")
-        n = steps or num_inference_steps or c.num_inference_steps
-        method = sampler or c.integration_method
+        n = steps or num_inference_steps or self.config.num_inference_steps
+        method = sampler or self.config.integration_method
         if method not in METHODS:
             raise ValueError(f"sampler must be one of {METHODS} for a flow policy, got {method!r}")
-        obs, unbatched = self._obs_dict(obs_history)
-        was_training = self.training
-        self.eval()  # centre crop for images; no dropout anywhere
-        try:
-            cond = self.encode_obs(obs)  # (B, cond_dim)
-            shape = (cond.shape[0], c.horizon, c.action_dim)
+
+        def draw(cond: torch.Tensor, shape: tuple[int, int, int]) -> Any:
             gen_device = generator.device if generator is not None else cond.device
             x1 = torch.randn(shape, generator=generator, device=gen_device).to(cond.device)  # (B, Tp, Da) at t = 1
             out = integrate(self.velocity, x1, cond, steps=n, method=method, step_fn=step_fn,
                             return_trajectory=return_trajectory)
-        finally:
-            self.train(was_training)
-        chunk_n, traj_n = out if return_trajectory else (out, None)
-        chunk_n = chunk_n.clamp(-1.0, 1.0)  # (B, Tp, Da): the range of the normalised data
-        if return_trajectory:
-            traj = self.normalizers["action"].unnormalize(traj_n)  # (N+1, B, Tp, Da)
-            return self._finish(chunk_n, obs_history, unbatched), traj
-        return self._finish(chunk_n, obs_history, unbatched)
+            chunk_n, traj_n = out if return_trajectory else (out, None)
+            chunk_n = chunk_n.clamp(-1.0, 1.0)  # (B, Tp, Da): the range of the normalised data
+            return (chunk_n, traj_n) if return_trajectory else chunk_n
+
+        return self._sample_chunk(obs_history, draw, return_trajectory)

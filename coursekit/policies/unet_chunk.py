@@ -182,6 +182,28 @@ class UNetChunkPolicy(ChunkPolicy):
                              f"observations' B, got {tuple(action.shape)}")
         return self.encode_obs(obs), self.normalizers["action"].normalize(action)
 
+    def _sample_chunk(self, obs_history: Any, draw: Any, return_trajectory: bool = False) -> Any:
+        """The prediction shared by every generative head on this backbone: check and encode the
+        raw history, call ``draw(cond (B, cond_dim), shape (B, Tp, Da))`` in eval mode (centre crop
+        for images; no dropout), restore the training flag, and return raw units as
+        :meth:`predict_chunk` promises. ``draw`` returns the normalised chunk (B, Tp, Da), or
+        (chunk, path (n+1, B, Tp, Da)) with ``return_trajectory``; the path comes back in raw units."""
+        self._require_normalizers()
+        c = self.config
+        obs, unbatched = self._obs_dict(obs_history)
+        was_training = self.training
+        self.eval()
+        try:
+            cond = self.encode_obs(obs)  # (B, cond_dim)
+            out = draw(cond, (cond.shape[0], c.horizon, c.action_dim))
+        finally:
+            self.train(was_training)
+        if return_trajectory:
+            chunk_n, traj_n = out
+            traj = self.normalizers["action"].unnormalize(traj_n)  # (n+1, B, Tp, Da)
+            return self._finish(chunk_n, obs_history, unbatched), traj
+        return self._finish(out, obs_history, unbatched)
+
     def _finish(self, chunk_n: torch.Tensor, like: Any, unbatched: bool) -> Any:
         """Normalised chunk (B, Tp, Da) -> raw units, unbatched if the input was, numpy if the input was."""
         chunk = self.normalizers["action"].unnormalize(chunk_n)  # (B, Tp, Da)
