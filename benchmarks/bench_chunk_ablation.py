@@ -36,6 +36,8 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.protocol import add_protocol_args, protocol_seeds
+
 SECTION = "Chunk ablation (PushT)"
 ROOT = Path(__file__).resolve().parent.parent
 DATA = ROOT / "outputs" / "data" / "pusht_400ep_seed0_noise0-5.npz"
@@ -181,8 +183,7 @@ def part_train(args, seeds: list[int], rec) -> None:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--only", choices=("ta", "train"), default="ta", help="ta: the shipped DP vs Ta; train: the multi-seed ablation")
-    parser.add_argument("--episodes", type=int, default=200)
-    parser.add_argument("--seed-start", type=int, default=100_000, help="protocol 100000, validation 200000")
+    add_protocol_args(parser)
     parser.add_argument("--policy", choices=sorted(SHIPPED), default="diffusion", help="shipped checkpoint (part ta)")
     parser.add_argument("--ta", type=int, nargs="+", default=[15, 8, 4, 2, 1], help="Ta values (part ta)")
     parser.add_argument("--train-seeds", type=int, nargs="+", default=[0, 1, 2])
@@ -191,18 +192,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--steps", type=int, default=None, help="training budget in optimiser steps instead")
     parser.add_argument("--data", type=Path, default=DATA)
     parser.add_argument("--out", type=Path, default=ROOT / "outputs" / "bench_chunk_ablation")
-    parser.add_argument("--threads", type=int, default=1)
-    parser.add_argument("--no-record", action="store_true")
     args = parser.parse_args(argv)
-    import torch
-
-    torch.set_num_threads(args.threads)
-    if args.episodes < 1:
-        raise SystemExit(f"--episodes must be >= 1, got {args.episodes}")
+    seeds = protocol_seeds(args)
     if args.only == "train" and not args.data.exists():
         raise SystemExit(f"--data {args.data} does not exist (make it with: coursekit collect pusht --episodes 400 "
                          f"--action-noise 0,5)")
-    seeds = list(range(args.seed_start, args.seed_start + args.episodes))
     args.out.mkdir(parents=True, exist_ok=True)
     cmd = f".venv/bin/python -m benchmarks.bench_chunk_ablation --only {args.only} --episodes {args.episodes} " \
           f"--seed-start {args.seed_start} --threads {args.threads}" + (f" --policy {args.policy}" if args.only == "ta" else "")

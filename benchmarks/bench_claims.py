@@ -32,6 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.protocol import add_protocol_args, protocol_seeds
+
 SECTION = "Claims (PushT, shipped checkpoints)"
 ROOT = Path(__file__).resolve().parent.parent
 TABLE = ROOT / "benchmarks" / "two_way_starts.json"
@@ -125,23 +127,15 @@ def estimates(values: np.ndarray, success: np.ndarray | None = None):
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--episodes", type=int, default=200, help="episodes (reset seeds) per policy")
-    parser.add_argument("--seed-start", type=int, default=100_000, help="first reset seed (protocol 100000, validation 200000)")
+    add_protocol_args(parser)
     parser.add_argument("--policies", nargs="+", default=["dp_ddim10", "regression"], choices=sorted(POLICIES))
     parser.add_argument("--parts", nargs="+", default=list(PARTS), choices=PARTS)
     parser.add_argument("--out", type=Path, default=ROOT / "outputs" / "bench_claims", help="per-episode results")
     parser.add_argument("--commit-starts", type=int, default=16, help="two-way starts for the commitment part")
     parser.add_argument("--commit-samples", type=int, default=32, help="DP chunks sampled per start")
     parser.add_argument("--compare", type=Path, default=None, help="an earlier DDIM-10 per-episode json to check against")
-    parser.add_argument("--threads", type=int, default=1, help="torch threads")
-    parser.add_argument("--no-record", action="store_true", help="print, do not write results.json")
     args = parser.parse_args(argv)
-    import torch
-
-    torch.set_num_threads(args.threads)
-    if args.episodes < 1:
-        raise SystemExit(f"--episodes must be >= 1, got {args.episodes}")
-    seeds = list(range(args.seed_start, args.seed_start + args.episodes))
+    seeds = protocol_seeds(args)
     args.out.mkdir(parents=True, exist_ok=True)
     flags = two_way_flags(seeds, write=not args.no_record)
     two = np.array([flags[s]["two_way"] for s in seeds])

@@ -26,6 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.protocol import add_protocol_args, protocol_seeds
+
 SECTION = "Claims (arm pair, shipped checkpoints)"
 ROOT = Path(__file__).resolve().parent.parent
 ARM_JOINTS = (0, 1, 2, 3, 4, 5, 7, 8, 9, 10, 11, 12)
@@ -45,29 +47,21 @@ def executors(k: int, decays: list[float]) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--episodes", type=int, default=20, help="held-out episodes per executor")
-    parser.add_argument("--seed-start", type=int, default=100_000, help="first spawn seed (protocol 100000+)")
+    add_protocol_args(parser, episodes=200, what="per executor")
     parser.add_argument("--decays", type=float, nargs="+", default=[0.0, 0.01, 0.1, 1.0], help="ensembling m values")
     parser.add_argument("--out", type=Path, default=ROOT / "outputs" / "bench_smoothness", help="per-episode results")
-    parser.add_argument("--threads", type=int, default=1, help="torch threads")
-    parser.add_argument("--no-record", action="store_true", help="print, do not write results.json")
     args = parser.parse_args(argv)
-    import torch
-
+    seeds = protocol_seeds(args)
     from coursekit.checkpoint import find_checkpoint, load_checkpoint, read_checkpoint_info
     from coursekit.envs.aloha.model import CONTROL_DT
     from coursekit.evaluate import evaluate_aloha
     from coursekit.evaluate.behaviour import rms_jerk
     from coursekit.stats import mean_estimate, rate_estimate
 
-    torch.set_num_threads(args.threads)
-    if args.episodes < 1:
-        raise SystemExit(f"--episodes must be >= 1, got {args.episodes}")
     path = find_checkpoint("act_transfer_cube")
     if path is None:
         raise SystemExit("no shipped checkpoint 'act_transfer_cube'")
     policy, meta = load_checkpoint(path, device="cpu"), read_checkpoint_info(path)["dataset"]
-    seeds = list(range(args.seed_start, args.seed_start + args.episodes))
     seeds_txt = f"{seeds[0]}-{seeds[-1]}"
     args.out.mkdir(parents=True, exist_ok=True)
     cmd = (f".venv/bin/python -m benchmarks.bench_smoothness --episodes {args.episodes} --seed-start {args.seed_start}"
