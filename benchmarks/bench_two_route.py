@@ -1,0 +1,205 @@
+"""Chapter 1's averaging failure, measured: one start, two routes, regression vs Diffusion Policy.
+
+    .venv/bin/python -m benchmarks.bench_two_route                       # 3 training seeds (about 10 min, 1 core)
+    .venv/bin/python -m benchmarks.bench_two_route --steps 50 --rollouts 2 --no-record   # smoke
+
+Why this set-up: on the whole task each start is demonstrated once, so a chunked regressor can
+(and, measured in "Claims (PushT, shipped checkpoints)", does) learn a committed side per start;
+MSE's averaging bites where the SAME situation was demonstrated both ways. Chapter 1 builds that
+case on purpose (Chi et al. 2023, Sec. 1 and Fig. 3 make the same argument): ``--runs-each``
+clockwise and as many anticlockwise expert runs from ``TWO_WAY_START`` (they differ only in the
+planner's seeded coin), nothing else. On exactly these demonstrations, with one U-Net backbone
+(down_dims ``--down-dims``, To = 2, Tp = 16, Ta = 8, keypoint features, recipe "cpu",
+``--steps`` optimiser steps), train chunked regression and Diffusion Policy (DDIM-10) with each of
+``--train-seeds`` and measure from ``TWO_WAY_START``:
+
+- the first chunk's side (``coursekit.experts.pusht_two_ways.path_side``: cw, ccw, or round
+  neither side = less than 20 degrees about the T), regression's one chunk and ``--samples`` DP
+  chunks per training seed;
+- ``--rollouts`` closed-loop episodes of 300 steps (DP: a different sampling stream for each;
+  regression is deterministic, so its episodes are identical): score (max coverage, the paper's
+  metric), success, and steps stalled against the T (``coursekit.evaluate.behaviour``).
+
+Rows go to the section "Claims (PushT, two-route start)" with a t-interval over training seeds
+(scores) or a Wilson interval over the pooled chunks (sides).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+SECTION = "Claims (PushT, two-route start)"
+ROOT = Path(__file__).resolve().parent.parent
+HEADS = {"chunked regression": ("regression", {}), "DP DDIM-10": ("diffusion", {"sampler": "ddim", "num_inference_steps": 10})}
+"""row label -> (policy type, sampling options)."""
+
+
+def two_route_runs(runs_each: int) -> tuple[list, list[int]]:
+    """``runs_each`` clockwise then as many anticlockwise expert runs from TWO_WAY_START, and their coin seeds."""
+    from coursekit.experts.pusht_planner import TWO_WAY_START
+    from coursekit.viz.expert_plots import expert_runs_from
+
+    picked: dict[str, list] = {"cw": [], "ccw": []}
+    for coin in range(20 * runs_each):
+        (rec,) = expert_runs_from(TWO_WAY_START, coin_seeds=[coin])
+        side = rec.route_choices[0]["taken"] if rec.route_choices else None
+        if side in picked and len(picked[side]) < runs_each and rec.success_step is not None:
+            picked[side].append((coin, rec))
+        if all(len(v) == runs_each for v in picked.values()):
+            break
+    if not all(len(v) == runs_each for v in picked.values()):
+        raise RuntimeError(f"found {len(picked['cw'])} cw / {len(picked['ccw'])} ccw successful runs in "
+                           f"{20 * runs_each} coin seeds; ask for fewer --runs-each")
+    chosen = picked["cw"] + picked["ccw"]
+    return [r for _, r in chosen], [c for c, _ in chosen]
+
+
+class ResetToStart:
+    """PushT that always resets to one state (the evaluation's seeds only number the episodes)."""
+
+    def __init__(self, env, state) -> None:
+        self.env, self.state, self.unwrapped = env, list(map(float, state)), env.unwrapped
+
+    def reset(self, seed=None, options=None):
+        return self.env.reset(seed=seed, options={"reset_to_state": self.state})
+
+    def step(self, action):
+        return self.env.step(action)
+
+    def close(self) -> None:
+        self.env.close()
+
+
+def measure(policy, sampling: dict, n_samples: int, n_rollouts: int, seed: int) -> dict:
+    """First-chunk sides and closed-loop outcomes of ``policy`` from TWO_WAY_START (see module docstring)."""
+    import torch
+
+    from benchmarks.claims_commitment import chunk_sides
+    from coursekit.data.features import get_features
+    from coursekit.envs.pusht import PushTEnv
+    from coursekit.evaluate.behaviour import stalled_steps
+    from coursekit.evaluate.closed_loop import evaluate
+    from coursekit.evaluate.pusht import PushTAdapter
+    from coursekit.experts.pusht_planner import TWO_WAY_START
+
+    env = PushTEnv(obs_type="state")
+    obs, _ = env.reset(options={"reset_to_state": list(TWO_WAY_START)})
+    state = np.asarray(env.get_state()[:5])
+    feats = get_features(policy.config.features)(obs)  # (Do,)
+    history = np.repeat(feats[None, None], policy.config.n_obs_steps, axis=1)  # (1, To, Do): as at an episode's start
+    n = n_samples if policy.policy_type == "diffusion" else 1  # regression is deterministic: one chunk says it all
+    chunks = policy.predict_chunk(np.repeat(history, n, axis=0), generator=torch.Generator().manual_seed(seed),
+                                  **sampling)  # (n, Tp, 2)
+    sides = chunk_sides(np.asarray(chunks), state, policy.config.n_obs_steps)
+
+    class TwoRouteAdapter(PushTAdapter):
+        def make_env(self, max_steps: int):
+            return ResetToStart(super().make_env(max_steps), TWO_WAY_START)
+
+    adapter = TwoRouteAdapter(policy)
+    k = n_rollouts if policy.policy_type == "diffusion" else 1
+    r = evaluate(policy, adapter, seeds=list(range(k)), sampling=sampling, seed=seed, progress=False, record=True)
+    stall = stalled_steps(r.states, r.length)
+    return {"sides": sides, "max_reward": r.max_reward.tolist(), "success": r.success.tolist(),
+            "stalled": stall.tolist(), "seconds": r.seconds}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--runs-each", type=int, default=6, help="expert runs per side from TWO_WAY_START (chapter 1: 6)")
+    parser.add_argument("--train-seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--steps", type=int, default=1500, help="optimiser steps per model")
+    parser.add_argument("--down-dims", type=int, nargs="+", default=[32, 64, 128], help="U-Net widths (both heads)")
+    parser.add_argument("--samples", type=int, default=64, help="DP first chunks sampled per training seed")
+    parser.add_argument("--rollouts", type=int, default=16, help="DP closed-loop episodes per training seed")
+    parser.add_argument("--out", type=Path, default=ROOT / "outputs" / "bench_two_route", help="models and results")
+    parser.add_argument("--threads", type=int, default=1, help="torch threads")
+    parser.add_argument("--no-record", action="store_true", help="print only, do not write results.json")
+    args = parser.parse_args(argv)
+    for flag in ("runs_each", "steps", "samples", "rollouts", "threads"):
+        if getattr(args, flag) < 1:
+            raise SystemExit(f"--{flag.replace('_', '-')} must be >= 1, got {getattr(args, flag)}")
+    import torch
+
+    from coursekit.checkpoint import CheckpointSaver, load_checkpoint
+    from coursekit.data.episodes import EpisodeDataset
+    from coursekit.nn.unet1d import UNet1DConfig
+    from coursekit.policies import make_policy
+    from coursekit.stats import rate_estimate
+    from coursekit.train import TrainConfig, train
+
+    torch.set_num_threads(args.threads)
+    runs, coins = two_route_runs(args.runs_each)
+    data = EpisodeDataset.from_episodes([{"state": r.states, "action": r.actions, "coverage": r.coverage,
+                                          "phase": r.phases} for r in runs],
+                                        {"env_id": "coursekit/PushT-v0", "obs_type": "state", "episode_seeds": [],
+                                         "two_route_coin_seeds": coins})
+    print(f"{len(runs)} expert runs from TWO_WAY_START (coin seeds {coins}): {data.n_steps} steps", flush=True)
+    tag = f"runs{args.runs_each}_s{args.steps}_u{'-'.join(map(str, args.down_dims))}"
+    cmd = (f".venv/bin/python -m benchmarks.bench_two_route --runs-each {args.runs_each} --steps {args.steps} "
+           f"--down-dims {' '.join(map(str, args.down_dims))} --train-seeds {' '.join(map(str, args.train_seeds))} "
+           f"--samples {args.samples} --rollouts {args.rollouts} --threads {args.threads}")
+    results: dict[str, list[dict]] = {}
+    for label, (kind, sampling) in HEADS.items():
+        for ts in args.train_seeds:
+            run = args.out / f"{kind}_{tag}_seed{ts}"
+            file = run / f"two_route_samples{args.samples}_rollouts{args.rollouts}.json"
+            if file.exists():
+                results.setdefault(label, []).append(json.loads(file.read_text()))
+                continue
+            if (run / "config.json").exists():
+                policy = load_checkpoint(run, device="cpu")
+            else:
+                policy, batches, recipe = make_policy(kind, data, features="pusht_keypoints", recipe="cpu", seed=ts,
+                                                      unet=UNet1DConfig(down_dims=tuple(args.down_dims)))
+                torch.manual_seed(ts)
+                train(policy, batches, TrainConfig(**{**recipe, "max_steps": args.steps, "seed": ts,
+                                                      "num_threads": args.threads, "progress": False,
+                                                      "checkpoint_every_minutes": None}),
+                      callbacks=[CheckpointSaver(run, dataset_meta=data.meta)])
+            out = measure(policy, sampling, args.samples, args.rollouts, seed=ts)
+            file.write_text(json.dumps(out) + "\n")
+            results.setdefault(label, []).append(out)
+            print(f"{label}, training seed {ts}: sides {dict((s, out['sides'].count(s)) for s in ('cw', 'ccw', 'none'))}"
+                  f"; score {np.mean(out['max_reward']):.3f}, stalled {np.mean(out['stalled']):.1f} steps", flush=True)
+
+    from benchmarks.bench_chunk_ablation import _t_estimate
+
+    k = len(args.train_seeds)
+    where = f"TWO_WAY_START; training seeds {args.train_seeds[0]}-{args.train_seeds[-1]}"
+    conditions = (f"{len(runs)} expert runs from TWO_WAY_START ({args.runs_each} cw + {args.runs_each} ccw) and "
+                  f"nothing else; U-Net {args.down_dims}, To=2, Tp=16, Ta=8, keypoints, recipe cpu, {args.steps} "
+                  f"steps; {k} training seed(s) {args.train_seeds}")
+
+    def rec(name, value, lo, hi, n, note):
+        print(f"  {name}: {value:.3f} [{lo:.3f}, {hi:.3f}] (n={n}); {note}", flush=True)
+        if not args.no_record:
+            from benchmarks.results import record
+
+            record(SECTION, name, round(value, 3), "", cmd, note=note, interval=(min(lo, value), max(hi, value)),
+                   n=n, seeds=where)
+
+    for label, outs in results.items():
+        sides = np.array([s for o in outs for s in o["sides"]])
+        est = rate_estimate(sides == "none")
+        per_chunk = "one deterministic chunk" if label == "chunked regression" else f"{args.samples} sampled chunks"
+        rec(f"{label}: first chunk round neither side", est.value, est.lo, est.hi, est.n,
+            f"share of first chunks ({per_chunk} per training seed, pooled; Wilson interval); cw "
+            f"{np.mean(sides == 'cw'):.2f}, ccw {np.mean(sides == 'ccw'):.2f}; {conditions}")
+        for figure, key, scale in (("score", "max_reward", 1.0), ("steps stalled against the T", "stalled", 1.0)):
+            per_seed = [float(np.mean(o[key])) * scale for o in outs]
+            mean, lo, hi = _t_estimate(per_seed)
+            if figure == "score":
+                lo, hi = max(0.0, lo), min(1.0, hi)
+            rec(f"{label}: {figure} from TWO_WAY_START", mean, lo, hi, sum(len(o[key]) for o in outs),
+                f"mean over training seeds (per seed: {', '.join(f'{v:.3f}' for v in per_seed)}), each the mean of "
+                f"{len(outs[0][key])} episode(s) of 300 steps; 95 % t-interval over training seeds; {conditions}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
