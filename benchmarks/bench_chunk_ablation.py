@@ -131,10 +131,10 @@ def train_or_load(name: str, ts: int, args, dataset):
         cfg["unet"] = UNet1DConfig(**cfg["unet"])
     policy, batches, recipe = make_policy(kind, dataset, features="pusht_keypoints", recipe="cpu", seed=ts, **cfg)
     torch.manual_seed(ts)
-    train(policy, batches, TrainConfig(**{**recipe, **budget, "seed": ts, "num_threads": args.threads,
-                                          "progress": False, "checkpoint_every_minutes": None}),
-          callbacks=[CheckpointSaver(run, dataset_meta=dataset.meta)])
-    return policy, run
+    result = train(policy, batches, TrainConfig(**{**recipe, **budget, "seed": ts, "num_threads": args.threads,
+                                                   "progress": False, "checkpoint_every_minutes": None}),
+                   callbacks=[CheckpointSaver(run, dataset_meta=dataset.meta)])
+    return result.policy, run  # the EMA weights: what the checkpoint holds (``policy`` itself keeps the raw ones)
 
 
 def part_train(args, seeds: list[int], rec) -> None:

@@ -174,10 +174,10 @@ def main(argv: list[str] | None = None) -> int:
                 policy, batches, recipe = make_policy(kind, data, features="pusht_keypoints", recipe="cpu", seed=ts,
                                                       unet=UNet1DConfig(down_dims=tuple(args.down_dims)))
                 torch.manual_seed(ts)
-                train(policy, batches, TrainConfig(**{**recipe, "max_steps": args.steps, "seed": ts,
-                                                      "num_threads": args.threads, "progress": False,
-                                                      "checkpoint_every_minutes": None}),
-                      callbacks=[CheckpointSaver(run, dataset_meta=data.meta)])
+                policy = train(policy, batches, TrainConfig(**{**recipe, "max_steps": args.steps, "seed": ts,
+                                                               "num_threads": args.threads, "progress": False,
+                                                               "checkpoint_every_minutes": None}),
+                               callbacks=[CheckpointSaver(run, dataset_meta=data.meta)]).policy  # EMA, as saved
             out = measure(policy, sampling, runs, args.samples, args.rollouts, seed=ts)
             file.write_text(json.dumps(out) + "\n")
             results.setdefault(label, []).append(out)
@@ -197,7 +197,8 @@ def main(argv: list[str] | None = None) -> int:
         if not args.no_record:
             from benchmarks.results import record
 
-            record(SECTION, name, round(value, 3), "", cmd, note=note, interval=(min(lo, value), max(hi, value)),
+            v = round(value, 3)
+            record(SECTION, name, v, "", cmd, note=note, interval=(min(round(lo, 3), v), max(round(hi, 3), v)),
                    n=n, seeds=where)
 
     for label, outs in results.items():
