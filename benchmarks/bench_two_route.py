@@ -212,8 +212,7 @@ def main(argv: list[str] | None = None) -> int:
         for figure, key, scale in (("score", "max_reward", 1.0), ("steps stalled against the T", "stalled", 1.0)):
             per_seed = [float(np.mean(o[key])) * scale for o in outs]
             mean, lo, hi = _t_estimate(per_seed)
-            if figure == "score":
-                lo, hi = max(0.0, lo), min(1.0, hi)
+            lo, hi = max(0.0, lo), (min(1.0, hi) if figure == "score" else hi)  # neither can be negative
             rec(f"{label}: {figure} from TWO_WAY_START", mean, lo, hi, sum(len(o[key]) for o in outs),
                 f"mean over training seeds (per seed: {', '.join(f'{v:.3f}' for v in per_seed)}), each the mean of "
                 f"{len(outs[0][key])} episode(s) of 300 steps; 95 % t-interval over training seeds; {conditions}")
