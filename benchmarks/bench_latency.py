@@ -164,7 +164,8 @@ def _record_point(label, task, strategy, d, parts, args, bootstrap_interval, wil
     smooth = {k: float(np.average([p["smooth"][k] for p in parts], weights=[len(p["seeds"]) for p in parts]))
               for k in parts[0]["smooth"]}
     cmd = (f"{COMMAND} --only curves --heads {args.head_of[label]} --strategies {strategy} --d {d} "
-           f"--episodes {args.episodes} --seed-start {args.seed_start}"
+           f"--episodes {args.episodes} --seed-start {args.seed_start} --block {args.block}"  # the block size fixes
+           # how episodes share a batch and a noise stream, so it is part of what reproduces the number exactly
            f"{f' --max-guidance {args.max_guidance:g} --prefix {args.prefix}' if strategy == 'rtc' else ''}")
     note = (f"{n} held-out seeds{' (REDUCED run: the protocol is 200)' if n < 200 else ''}, sampling seed "
             f"{args.seed}, delay d={d} control steps, strategy {strategy}"
