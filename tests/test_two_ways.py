@@ -109,3 +109,20 @@ def test_still_steps_counts_slow_pusher_steps_in_a_window():
     assert still_steps(s, np.array([10])).tolist() == [5]
     assert still_steps(s, np.array([10]), first=3).tolist() == [3]
     assert still_steps(s, np.array([2])).tolist() == [2]
+
+
+def test_two_route_reference_paths_and_nearest():
+    """bench_two_route's classifier: the mean cw / ccw first chunks and their average (MSE's optimum
+    on an even mixture); each chunk is named after the nearest of the three."""
+    from types import SimpleNamespace
+
+    from benchmarks.bench_two_route import nearest_path, reference_paths
+
+    up = np.stack([np.linspace(0, 100, 5), np.linspace(0, -50, 5)], axis=1)  # (5, 2): round one side
+    down = up * np.array([1.0, -1.0])  # the mirror image: round the other side
+    runs = [SimpleNamespace(actions=a, route_choices=[{"taken": s}]) for a, s in ((up, "cw"), (down, "ccw"))] * 2
+    refs = reference_paths(runs, horizon=5)
+    assert np.allclose(refs["cw"], up) and np.allclose(refs["ccw"], down)
+    assert np.allclose(refs["between"], (up + down) / 2)  # the straight line between them
+    chunks = np.stack([up + 3.0, down - 3.0, (up + down) / 2 + 1.0])  # (3, 5, 2)
+    assert nearest_path(chunks, refs) == ["cw", "ccw", "between"]
