@@ -203,6 +203,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.only == "train":
         cmd += f" --train-seeds {' '.join(map(str, args.train_seeds))} " + (f"--steps {args.steps}" if args.steps
                                                                              else f"--minutes {args.minutes:g}")
+        cmd += "".join(f" --variants '{v}'" if i == 0 else f" '{v}'" for i, v in enumerate(args.variants))
 
     def rec(name, est, note):
         value, lo, hi, n = (est.value, est.lo, est.hi, est.n) if hasattr(est, "value") else est
