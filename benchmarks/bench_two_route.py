@@ -32,6 +32,7 @@ import argparse
 import json
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 
 SECTION = "Claims (PushT, two-route start)"
@@ -61,20 +62,15 @@ def two_route_runs(runs_each: int) -> tuple[list, list[int]]:
     return [r for _, r in chosen], [c for c, _ in chosen]
 
 
-class ResetToStart:
+class ResetToStart(gym.Wrapper):
     """PushT that always resets to one state (the evaluation's seeds only number the episodes)."""
 
-    def __init__(self, env, state) -> None:
-        self.env, self.state, self.unwrapped = env, list(map(float, state)), env.unwrapped
+    def __init__(self, env: gym.Env, state) -> None:
+        super().__init__(env)
+        self.state = [float(v) for v in state]  # (5,) [agent x, y, block x, y, angle]
 
-    def reset(self, seed=None, options=None):
+    def reset(self, *, seed=None, options=None):
         return self.env.reset(seed=seed, options={"reset_to_state": self.state})
-
-    def step(self, action):
-        return self.env.step(action)
-
-    def close(self) -> None:
-        self.env.close()
 
 
 def reference_paths(runs: list, horizon: int) -> dict[str, np.ndarray]:
@@ -113,7 +109,7 @@ def measure(policy, sampling: dict, runs: list, n_samples: int, n_rollouts: int,
                                              **sampling))[:, to - 1:]  # (n, Tp - To + 1, 2): from the current step on
     paths = nearest_path(chunks, reference_paths(runs, chunks.shape[1]))
 
-    class TwoRouteAdapter(PushTAdapter):
+    class TwoRouteAdapter(PushTAdapter):  # PushT as usual, but every episode starts at TWO_WAY_START
         def make_env(self, max_steps: int):
             return ResetToStart(super().make_env(max_steps), TWO_WAY_START)
 
