@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.protocol import add_protocol_args, protocol_seeds
+from benchmarks.protocol import add_protocol_args, protocol_seeds, t_estimate
 
 SECTION = "Chunk ablation (PushT)"
 ROOT = Path(__file__).resolve().parent.parent
@@ -100,17 +100,6 @@ def part_ta(args, seeds: list[int], rec) -> None:
             f"training seed; {saved['seconds']:.0f} s to evaluate")
 
 
-def _t_estimate(values: list[float]) -> tuple[float, float, float]:
-    """(mean, lo, hi): 95 % t-interval over training seeds (lo = hi = mean for one seed)."""
-    from scipy import stats as sps
-
-    k, mean = len(values), float(np.mean(values))
-    if k < 2:
-        return mean, mean, mean
-    half = float(sps.t.ppf(0.975, k - 1) * np.std(values, ddof=1) / np.sqrt(k))
-    return mean, mean - half, mean + half
-
-
 def train_or_load(name: str, ts: int, args, dataset):
     """The variant ``name`` trained with training seed ``ts`` (or loaded from ``--out``): (policy, run dir)."""
     import torch
@@ -162,7 +151,7 @@ def part_train(args, seeds: list[int], rec) -> None:
         k = len(per_seed)
         for subset, mask in subsets.items():
             scores = [float(r[mask].mean()) for r in per_seed]
-            mean, lo, hi = _t_estimate(scores)
+            mean, lo, hi = t_estimate(scores)
             label = f"{name} score, {k} training seed(s)" + ("" if subset == "all starts" else f", {subset}")
             rec(label, (mean, max(0.0, lo), min(1.0, hi), k * int(mask.sum())),
                 f"mean over training seeds {args.train_seeds} (per seed: {', '.join(f'{s:.3f}' for s in scores)}; "
@@ -173,7 +162,7 @@ def part_train(args, seeds: list[int], rec) -> None:
         short = other.split(" (")[0]
         for subset, mask in subsets.items():
             gaps = [float(a[mask].mean() - b[mask].mean()) for a, b in zip(rewards[dp], rewards[other])]
-            mean, lo, hi = _t_estimate(gaps)
+            mean, lo, hi = t_estimate(gaps)
             rec(f"DP DDIM-10 minus {short}, {len(gaps)} training seed(s), {subset}", (mean, lo, hi, len(gaps) * int(mask.sum())),
                 f"paired by training seed {args.train_seeds} (same seed for both; per seed: "
                 f"{', '.join(f'{g:+.3f}' for g in gaps)}); 95 % t-interval over training seeds; "

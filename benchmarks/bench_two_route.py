@@ -35,6 +35,8 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
+from benchmarks.protocol import t_estimate
+
 SECTION = "Claims (PushT, two-route start)"
 ROOT = Path(__file__).resolve().parent.parent
 PATHS = ("cw", "ccw", "between")
@@ -180,8 +182,6 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{label}, training seed {ts}: first chunks {dict((s, out['paths'].count(s)) for s in PATHS)}"
                   f"; score {np.mean(out['max_reward']):.3f}, stalled {np.mean(out['stalled']):.1f} steps", flush=True)
 
-    from benchmarks.bench_chunk_ablation import _t_estimate
-
     k = len(args.train_seeds)
     where = f"TWO_WAY_START; training seeds {args.train_seeds[0]}-{args.train_seeds[-1]}"
     conditions = (f"{len(runs)} expert runs from TWO_WAY_START ({args.runs_each} cw + {args.runs_each} ccw) and "
@@ -207,7 +207,7 @@ def main(argv: list[str] | None = None) -> int:
             f"({np.mean(paths == 'ccw'):.2f}); {conditions}")
         for figure, key, scale in (("score", "max_reward", 1.0), ("steps stalled against the T", "stalled", 1.0)):
             per_seed = [float(np.mean(o[key])) * scale for o in outs]
-            mean, lo, hi = _t_estimate(per_seed)
+            mean, lo, hi = t_estimate(per_seed)
             lo, hi = max(0.0, lo), (min(1.0, hi) if figure == "score" else hi)  # neither can be negative
             rec(f"{label}: {figure} from TWO_WAY_START", mean, lo, hi, sum(len(o[key]) for o in outs),
                 f"mean over training seeds (per seed: {', '.join(f'{v:.3f}' for v in per_seed)}), each the mean of "

@@ -3,12 +3,15 @@
 A reported score is on >= 200 held-out reset seeds from 100000 (the protocol range); variants are
 chosen on 200000+ (validation), never on the reported range. ``add_protocol_args`` adds
 ``--episodes``, ``--seed-start``, ``--threads`` and ``--no-record``; ``protocol_seeds`` checks
-them, sets torch's threads and returns the seed list.
+them, sets torch's threads and returns the seed list. ``t_estimate`` is the interval over
+training seeds (a handful of means, so Student's t, not a bootstrap).
 """
 
 from __future__ import annotations
 
 import argparse
+
+import numpy as np
 
 PROTOCOL_START, VALIDATION_START = 100_000, 200_000
 
@@ -37,3 +40,14 @@ def protocol_seeds(args: argparse.Namespace) -> list[int]:
 
     torch.set_num_threads(args.threads)
     return list(range(args.seed_start, args.seed_start + args.episodes))
+
+
+def t_estimate(values: list[float]) -> tuple[float, float, float]:
+    """(mean, lo, hi): 95 % t-interval over training seeds (lo = hi = mean for one seed)."""
+    from scipy import stats as sps
+
+    k, mean = len(values), float(np.mean(values))
+    if k < 2:
+        return mean, mean, mean
+    half = float(sps.t.ppf(0.975, k - 1) * np.std(values, ddof=1) / np.sqrt(k))
+    return mean, mean - half, mean + half

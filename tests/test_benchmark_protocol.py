@@ -31,3 +31,15 @@ def test_bad_values_are_named(argv, bad):
 def test_validation_range_is_flagged(capsys):
     assert protocol_seeds(parse("--seed-start", "200000", "--episodes", "3")) == [200000, 200001, 200002]
     assert "200000+ is validation" in capsys.readouterr().out
+
+
+def test_t_estimate_matches_scipy():
+    from scipy import stats
+
+    from benchmarks.protocol import t_estimate
+
+    values = [0.788, 0.793, 0.795]
+    mean, lo, hi = t_estimate(values)
+    ref = stats.t.interval(0.95, len(values) - 1, loc=sum(values) / 3, scale=stats.sem(values))
+    assert mean == pytest.approx(0.792) and (lo, hi) == pytest.approx(ref)
+    assert t_estimate([0.5]) == (0.5, 0.5, 0.5)  # one seed: no spread to estimate
