@@ -5,7 +5,8 @@ executed notebook has no error output and every cell ran; a slider moved by the 
 figure; a meshcat view has non-blank pixels. The teleoperation widget (chapter 1's cells, in a
 scratch notebook so that the rest of chapter 1 does not have to run) is turned by synthetic mouse
 events: the recorded episode's file loads, ``coursekit train`` takes it, and replaying it in a
-fresh env reproduces its states exactly.
+fresh env reproduces its states exactly; a press on the pusher where it is drawn and a drag to two
+points, in a wide and a narrow notebook, record the world points under the mouse.
 
 The server always stops (``lab_session.lab_server``), and the module's teardown asserts that no
 process it started is left. Without chromium every test is skipped with one clear line.
@@ -15,7 +16,9 @@ from __future__ import annotations
 
 import io
 import json
+import re
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -133,19 +136,22 @@ def test_chapter5_runs_the_ta_scrubber_moves_and_meshcat_draws(page, lab):
     assert_meshcat_draws(page)
 
 
-def _teleop_notebook(lab) -> str:
-    """Chapter 1's teleoperation cell, verbatim, after the two names it uses from earlier cells."""
+def _teleop_notebook(lab, name: str = "teleop.ipynb", outputs: Path | None = None) -> str:
+    """Chapter 1's teleoperation cell, verbatim, after the two names it uses from earlier cells
+    (and, given ``outputs``, a ``COURSEKIT_OUTPUTS`` of its own, so its recording file is its own)."""
     from lab_session import ROOT
 
     ch1 = json.loads((ROOT / "notebooks" / "01_pusht_and_multimodality.ipynb").read_text())
     cell = next(c for c in ch1["cells"] if c.get("id") == "teleop-widget")
     head = "import os\nfrom coursekit.experts.pusht_planner import TWO_WAY_START"
+    if outputs is not None:
+        head += f"\nos.environ['COURSEKIT_OUTPUTS'] = {str(outputs)!r}"
     nb = {"cells": [{"cell_type": "code", "execution_count": None, "id": f"c{i}", "metadata": {}, "outputs": [],
                      "source": src} for i, src in enumerate([head, "".join(cell["source"])])],
           "metadata": {"kernelspec": {"display_name": "Python 3", "language": "python", "name": "python3"}},
           "nbformat": 4, "nbformat_minor": 5}
-    (lab.root / "teleop.ipynb").write_text(json.dumps(nb))
-    return "teleop.ipynb"
+    (lab.root / name).write_text(json.dumps(nb))
+    return name
 
 
 def test_teleop_widget_records_a_mouse_drag_that_trains_and_replays(page, lab, tmp_path):
@@ -199,6 +205,94 @@ def test_teleop_widget_records_a_mouse_drag_that_trains_and_replays(page, lab, t
     assert main(["train", "--data", str(path_file), "--steps", "2", "--out", str(out), "--threads", "1",
                  "--no-progress", "--down-dims", "16,32"]) == 0
     assert (out / "config.json").is_file()
+
+
+# A wide notebook, and one whose output area is narrower than the canvas's 400 px (shown at 388 here)
+TELEOP_VIEWPORTS = ((1400, 1000), (820, 900))
+TELEOP_TOL = 3.0  # world units; one screen px is 512 / 400 = 1.28 of them on the default canvas
+CONTENT_BOX_JS = """c => { const r = c.getBoundingClientRect();
+  const sx = r.width / c.offsetWidth, sy = r.height / c.offsetHeight;
+  return [r.left + c.clientLeft * sx, r.top + c.clientTop * sy, c.clientWidth * sx, c.clientHeight * sy]; }"""
+
+
+def _wait_readout(readout, predicate, what: str, timeout_s: float = 60) -> str:
+    deadline = time.monotonic() + timeout_s
+    while not predicate(text := readout.inner_text()) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert predicate(text), f"waited {timeout_s} s for {what}; the readout says {text!r}"
+    return text
+
+
+def _steps(text: str) -> int:
+    return int(re.search(r"step (\d+)", text).group(1))
+
+
+def _drawn_view(canvas):
+    """Where the canvas's picture lies on screen: its content box (left, top, width, height) in
+    viewport px, and the centroid (x, y) and width of the pusher as drawn there (its pixels)."""
+    from coursekit.envs.pusht_render import AGENT_COLOR
+
+    img = element_rgb(canvas)  # the border box, one image px per CSS px (device scale 1)
+    frame = canvas.bounding_box()
+    content = canvas.evaluate(CONTENT_BOX_JS)
+    ys, xs = np.nonzero(np.all(np.abs(img - np.array(AGENT_COLOR)) < 30, axis=-1))
+    assert len(xs) > 20, "the pusher is not drawn on the canvas"
+    centroid = (frame["x"] + xs.mean() + 0.5, frame["y"] + ys.mean() + 0.5)
+    return content, centroid, xs.max() - xs.min() + 1
+
+
+def _record_presses(page, world_points, episode: int):
+    """Start, press on the drawn pusher, drag to each world point (a few control steps at each),
+    release, Stop. Returns the screen points the mouse was at, their world points (through the
+    canvas's content box), the drawn pusher and its width in px."""
+    canvas, readout = page.locator(".ck-teleop-canvas"), page.locator(".ck-teleop-readout")
+    page.locator(".ck-teleop-start").click()
+    _wait_readout(readout, lambda t: "recording" in t, "Start")
+    (left, top, width, height), pusher, pusher_px = _drawn_view(canvas)
+    screen = [pusher] + [(left + x * width / 512, top + y * height / 512) for x, y in world_points]
+    under = [((sx - left) * 512 / width, (sy - top) * 512 / height) for sx, sy in screen]
+    for i, (sx, sy) in enumerate(screen):
+        page.mouse.move(sx, sy)
+        if i == 0:
+            page.mouse.down()
+        reached = _steps(readout.inner_text())
+        _wait_readout(readout, lambda t, n=reached: _steps(t) >= n + 4, "four control steps")
+    page.mouse.up()
+    page.locator(".ck-teleop-stop").click()
+    _wait_readout(readout, lambda t: f"kept {episode + 1}" in t, f"episode {episode} to be kept")
+    return screen, np.array(under), (pusher_px, width)
+
+
+def test_teleop_targets_land_under_the_mouse_at_two_notebook_widths(page, lab):
+    """Press on the pusher where it is drawn and drag to two points, in a wide and a narrow
+    notebook: every recorded target is the world point under the mouse, within a few pixels.
+    (The canvas once stretched to its button bar's width, which changes with the status text,
+    while the mouse was read as 400 px: a press on the pusher at (100, 256) sent it to (162, 412).)"""
+    from coursekit.data.episodes import EpisodeDataset
+    from coursekit.envs import pusht_geometry as geo
+
+    page.set_viewport_size({"width": TELEOP_VIEWPORTS[0][0], "height": TELEOP_VIEWPORTS[0][1]})
+    run_notebook(page, lab, _teleop_notebook(lab, "teleop_mapping.ipynb", lab.outputs / "mapping"))
+    world_points = [(150.0, 120.0), (420.0, 170.0)]
+    for episode, (vw, vh) in enumerate(TELEOP_VIEWPORTS):
+        page.set_viewport_size({"width": vw, "height": vh})
+        screen, under, (pusher_px, width) = _record_presses(page, world_points, episode)
+        data = EpisodeDataset.load(lab.outputs / "mapping" / "data" / "pusht_teleop.npz")
+        assert data.n_episodes == episode + 1
+        ep = data.episode(episode)
+        where = f"viewport {vw}x{vh}, canvas drawn {width:.0f} px wide"
+        # the test's own reading of the screen: the pusher is drawn where the state says it is
+        np.testing.assert_allclose(under[0], ep["state"][0, :2], atol=TELEOP_TOL, err_msg=where)
+        assert abs(pusher_px - 2 * geo.AGENT_RADIUS * width / 512) <= 3, (where, pusher_px)
+        np.testing.assert_allclose(under[1:], world_points, atol=TELEOP_TOL, err_msg=where)
+        # every recorded target is one of the three points under the mouse, in the order visited
+        actions = ep["action"]
+        dist = np.linalg.norm(actions[:, None, :] - under[None, :, :], axis=-1)  # (T, 3)
+        nearest = dist.argmin(axis=1)
+        off = dist.min(axis=1) > TELEOP_TOL
+        assert not off.any(), (f"{where}: targets {np.round(actions[off][:5], 1).tolist()} are not under the mouse "
+                               f"(it was at world {np.round(under, 1).tolist()})")
+        assert nearest[0] == 0 and set(nearest) == {0, 1, 2} and np.all(np.diff(nearest) >= 0), (where, nearest)
 
 
 def test_the_server_and_its_kernels_stop_even_when_a_test_fails(tmp_path):

@@ -38,7 +38,10 @@ function render({ model, el }) {
   const canvas = document.createElement("canvas");
   canvas.width = size; canvas.height = size;
   canvas.className = "ck-teleop-canvas";
-  canvas.style.cssText = "border:1px solid #999;cursor:crosshair;touch-action:none";
+  // Shown at `size` px, not stretched to the button bar's width (a column flex box stretches its
+  // items); only a narrower output area shrinks it, keeping it square.
+  canvas.style.cssText = `width:${size}px;max-width:100%;height:auto;flex:none;align-self:flex-start;` +
+    "box-sizing:content-box;border:1px solid #999;cursor:crosshair;touch-action:none";
   const bar = document.createElement("div");
   bar.style.cssText = "display:flex;gap:6px;align-items:center";
   const mk = (label, cls) => { const b = document.createElement("button"); b.textContent = label;
@@ -75,8 +78,13 @@ function render({ model, el }) {
       ` | step ${model.get("n_steps")} | kept ${model.get("n_kept")} | ${model.get("status")}`;
     start.disabled = rec; stop.disabled = !rec; discard.disabled = !rec;
   }
-  const world = (ev) => { const r = canvas.getBoundingClientRect();
-    return [(ev.clientX - r.left) / k, (ev.clientY - r.top) / k]; };
+  // Mouse -> world through the size the canvas is SHOWN at (its content box, inside the border;
+  // the ratio to offsetWidth undoes a CSS zoom or transform), never through `size`.
+  const world = (ev) => {
+    const r = canvas.getBoundingClientRect();
+    const sx = r.width / canvas.offsetWidth, sy = r.height / canvas.offsetHeight;
+    return [(ev.clientX - r.left - canvas.clientLeft * sx) * 512 / (canvas.clientWidth * sx),
+            (ev.clientY - r.top - canvas.clientTop * sy) * 512 / (canvas.clientHeight * sy)]; };
   canvas.addEventListener("pointerdown", (ev) => { if (!model.get("recording") && !starting) return;
     dragging = true; touched = true; target = world(ev); canvas.setPointerCapture?.(ev.pointerId); draw(); });
   canvas.addEventListener("pointermove", (ev) => { if (dragging) { target = world(ev); draw(); } });
@@ -110,7 +118,8 @@ class TeleopWidget(anywidget.AnyWidget):
         path: optional ``.npz`` the kept episodes go to after every Stop (an earlier recording
             there is extended, see :class:`~coursekit.teleop.TeleopRecorder`).
         first_seed, reset_state, config: as :class:`~coursekit.teleop.TeleopRecorder`.
-        size: canvas width and height in screen pixels (the world is 512 x 512).
+        size: canvas width and height in screen pixels (the world is 512 x 512); an output area
+            narrower than that shows it smaller, and the mouse maps through the size shown.
 
     ``widget.recorder`` is the recorder (``.dataset()``, ``.episodes``, ``.save()``); it can also be
     driven without a browser (``widget.recorder.record(targets)``), and the widget shows the result.
