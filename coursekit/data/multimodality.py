@@ -120,7 +120,7 @@ def is_two_way(vectors: np.ndarray, config: MultimodalityConfig) -> bool:
     unit = moving / np.linalg.norm(moving, axis=1, keepdims=True)
     cos = np.clip(unit @ unit.T, -1.0, 1.0)  # (M, M): cosine between every pair of headings
     main = int(np.argmax((cos >= math.cos(math.radians(config.mode_deg))).sum(axis=1)))
-    other = int((cos[main] < math.cos(math.radians(config.split_deg))).sum())
+    other = int((cos[main] < math.cos(math.radians(config.split_deg)) - 1e-9).sum())  # strictly more than split_deg
     return other >= max(2, math.ceil(config.min_fraction * len(moving)))
 
 
