@@ -25,11 +25,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("task", choices=sorted(TASKS), help="which task's scripted expert to run")
     parser.add_argument("--episodes", type=positive_int, default=None, help="number of demonstrations (default: 200 PushT, 50 ALOHA)")
     parser.add_argument("--seed", type=seed_int, default=0, help="seed of the first episode; episode i uses seed + i")
-    parser.add_argument("--out", type=Path, default=None, help="output .npz (default: outputs/data/<task>_<episodes>ep_seed<seed>[_noise<levels>].npz)")
+    parser.add_argument("--out", type=Path, default=None, help="output .npz (default: outputs/data/<task>_<episodes>ep_seed<seed>[_noise<levels>][_person].npz)")
     parser.add_argument("--action-noise", default=None,
                         help="pusht only: DART execution noise in px (the env runs the expert's target plus Gaussian "
                              "noise, the file keeps the clean target); a comma list is cycled over episodes, "
                              "e.g. 0,10 alternates clean and noisy demonstrations (default 0)")
+    parser.add_argument("--style", choices=["scripted", "person"], default=None,
+                        help="pusht only: scripted (default) = the planner's own demonstrations; person = with a "
+                             "person's variety (a random pick among equally good pushes at every re-plan, the long "
+                             "way round more often, a pace per episode, pauses)")
     parser.add_argument("--overwrite", action="store_true",
                         help="replace an existing dataset at --out (atomically: the old file stays until the new one is complete)")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
@@ -52,6 +56,13 @@ def run(args: argparse.Namespace) -> int:
 
         extra["action_noise"] = parse_action_noise(args.action_noise)
         tag = noise_tag(extra["action_noise"])
+    if args.style is not None:
+        if args.task != "pusht":
+            raise ValueError(f"--style is for the pusht expert only, not {args.task!r}")
+        from coursekit.experts.pusht_person import STYLES
+
+        extra["style"] = STYLES[args.style]
+        tag += "" if args.style == "scripted" else f"_{args.style}"
     out = args.out or Path("outputs/data") / f"{args.task}_{episodes}ep_seed{args.seed}{tag}.npz"
     check_output(out, what="coursekit dataset", is_ours=is_dataset_file, directory=False, overwrite=args.overwrite)
     for leftover in clean_leftovers(out):

@@ -37,6 +37,7 @@ import numpy as np
 from coursekit.envs import pusht_geometry as geo
 from coursekit.experts.pusht_clearance import local_to_world, point_distance, world_to_local
 from coursekit.experts.pusht_config import ExpertConfig
+from coursekit.experts.pusht_person import PersonStyle, StyleDraws
 from coursekit.experts.pusht_recording import PHASE_NAMES, PUSH, REST, SETTLE, TRAVEL, EpisodeRecord, Recorder
 from coursekit.experts.pusht_push_search import Push, PushSearch
 from coursekit.experts.pusht_routes import ANTICLOCKWISE, CLOCKWISE, STRAIGHT, speed_profile_targets
@@ -81,8 +82,10 @@ class Coin:
 class PushTExpert:
     """The planner. ``run_episode(env, seed)`` plays one episode in ``env`` and records it."""
 
-    def __init__(self, config: ExpertConfig | None = None):
+    def __init__(self, config: ExpertConfig | None = None, style: PersonStyle | None = None):
         self.config = config or ExpertConfig()
+        self.style = style
+        """None: the planner's own demonstrations; a PersonStyle: a person's variety (``pusht_person``)."""
         self.search = PushSearch(self.config)
         self.routes = self.search.routes
 
@@ -198,7 +201,15 @@ class PushTExpert:
         if action_noise > 0:
             rng = np.random.default_rng([NOISE_STREAM, int(stream_seed)])
             noise = lambda: rng.normal(0.0, action_noise, size=2)  # noqa: E731  (px, per axis)
+        draws = None if self.style is None else StyleDraws(self.style, stream_seed)
+        planner = self if draws is None else PushTExpert(draws.episode_config(cfg))  # this episode's pace
         ep = Recorder(env, info["coverage"], cfg.max_steps, search.rests_successfully, noise)
+        return planner._play(env, ep, coin, draws)
+
+    def _play(self, env, ep: Recorder, coin: Coin, draws: StyleDraws | None) -> EpisodeRecord:
+        """Settle, then plan / travel / push until done, then rest (module docstring, steps 1-5)."""
+        cfg, search = self.config, self.search
+        pick = None if draws is None else draws.pick
         self._settle(env, ep)
         choices: list[dict] = []
         bumps = 0
@@ -206,10 +217,10 @@ class PushTExpert:
         while not ep.done:
             state = env.get_state()
             if pushed is None:
-                plan = search.plan(state)
+                plan = search.plan(state, pick=pick)
             else:  # push on, or back off and push elsewhere: the simulator decides
                 backed_off, _ = search.simulate(state, pushed.back_off)
-                plan = search.plan(backed_off, extra_steps=len(pushed.back_off))
+                plan = search.plan(backed_off, extra_steps=len(pushed.back_off), pick=pick)
                 more = search.continuation(state, pushed)
                 if more is not None and (plan is None or more.score >= plan.score):
                     ep.follow(more.push_in, PUSH)
@@ -221,6 +232,12 @@ class PushTExpert:
             if plan is None or ep.done:
                 break
             if np.linalg.norm(state[:2] - plan.standoff) > 1.0:
+                pause = 0 if draws is None else draws.pause()
+                if pause:  # a person stops to look before setting off
+                    ep.follow(np.repeat(state[None, :2], pause, axis=0), TRAVEL)
+                    state = env.get_state()
+                    if ep.done:
+                        break
                 sides, toss = self.choose_sides(state, plan, coin)
                 if not sides:
                     break
@@ -275,15 +292,17 @@ def noise_tag(action_noise: Sequence[float]) -> str:
     return "" if set(action_noise) <= {0.0} else "_noise" + "-".join(f"{float(v):g}" for v in action_noise)
 
 
-def collect_dataset(n_episodes: int, seed: int, progress: bool = True,
-                    config: ExpertConfig | None = None, action_noise: float | Sequence[float] = 0.0) -> EpisodeDataset:
+def collect_dataset(n_episodes: int, seed: int, progress: bool = True, config: ExpertConfig | None = None,
+                    action_noise: float | Sequence[float] = 0.0, style: PersonStyle | None = None) -> EpisodeDataset:
     """Run the expert on the seeded reference resets ``seed, seed + 1, ...`` and collect
     ``n_episodes`` successful demonstrations (a failed seed, rare, is skipped and listed in
     ``meta["failed_seeds"]``). Deterministic: the same arguments give identical arrays.
 
     ``action_noise``: DART-style execution noise (px, see ``PushTExpert.run_episode``); a
     sequence is cycled over the attempts, e.g. ``(0, 10)`` alternates clean and noisy
-    episodes. Each episode's level is in ``meta["episode_noise"]``.
+    episodes. Each episode's level is in ``meta["episode_noise"]``. ``style``: demonstrations
+    with a person's variety (``pusht_person.PersonStyle``; None: the planner's own), kept in
+    ``meta["expert_style"]``.
 
     Arrays (N steps over all episodes; row t is the state BEFORE action t):
         "state"    (N, 5) float64 [agent_x, agent_y, block_x, block_y, block_angle UNWRAPPED]
@@ -309,7 +328,7 @@ def collect_dataset(n_episodes: int, seed: int, progress: bool = True,
     if not levels or not all(math.isfinite(v) and v >= 0 for v in levels):
         raise ValueError(f"action_noise must be a standard deviation >= 0 (px) or a non-empty sequence of them, "
                          f"got {action_noise!r}")
-    expert = PushTExpert(config)
+    expert = PushTExpert(config, style)
     env = PushTEnv(obs_type="state", max_episode_steps=expert.config.max_steps)
     episodes, meta_seeds, failed, success_steps, finish_steps, choices = [], [], [], [], [], []
     episode_noise = []
@@ -339,6 +358,7 @@ def collect_dataset(n_episodes: int, seed: int, progress: bool = True,
         "env_id": "coursekit/PushT-v0", "obs_type": "state",
         "expert": EXPERT_NAME, "expert_version": EXPERT_VERSION,
         "expert_config": asdict(expert.config),
+        "expert_style": None if style is None else asdict(style),
         "seed": int(seed), "n_episodes": int(n_episodes),
         "action_noise": levels, "episode_noise": episode_noise,
         "episode_seeds": meta_seeds, "failed_seeds": failed, "success_steps": success_steps,

@@ -21,6 +21,7 @@ import numpy as np
 from coursekit.envs import pusht_geometry as geo
 from coursekit.experts.pusht_clearance import local_to_world, world_to_local
 from coursekit.experts.pusht_config import ExpertConfig
+from coursekit.experts.pusht_person import Picker
 from coursekit.experts.pusht_push_model import candidate_contacts, pose_error, predict_pushes
 from coursekit.experts.pusht_routes import RoutePlanner
 
@@ -145,10 +146,11 @@ class PushSearch:
         cfg = self.config
         return np.where(length < 1.0, 0.0, length / cfg.travel_speed + cfg.travel_speed / cfg.travel_accel)
 
-    def plan(self, state: np.ndarray, extra_steps: float = 0.0) -> Push | None:
+    def plan(self, state: np.ndarray, extra_steps: float = 0.0, pick: Picker | None = None) -> Push | None:
         """Best push from ``state`` (7,): model ranking, then a check of the best ``n_verify``
         in the simulator (pusher at rest at the standoff). ``extra_steps`` are spent before
-        travelling (a back-off still to come)."""
+        travelling (a back-off still to come). ``pick`` (a person's choice, ``pusht_person``)
+        chooses among the checked pushes instead of the best one."""
         cfg = self.config
         pose = state[2:5]
         depths = np.asarray(cfg.push_depths)
@@ -160,7 +162,7 @@ class PushSearch:
         travel = extra_steps + self.travel_steps(np.where(reachable, lengths, 0.0))  # (M,)
         n_push = np.array([len(self.make_push(pose, 0, d).targets) for d in depths])  # (D,)
         score = np.where(reachable[:, None], gain / (travel[:, None] + n_push[None, :]), -np.inf)  # (M, D)
-        best = None
+        best, checked = None, []
         for flat in np.argsort(-score, axis=None)[: cfg.n_verify]:
             m, d = np.unravel_index(flat, score.shape)
             if not np.isfinite(score[m, d]):
@@ -168,9 +170,10 @@ class PushSearch:
             push = self.make_push(pose, int(m), float(depths[d]))
             at_standoff = np.concatenate([push.standoff, pose])  # pusher at rest there
             push = self._evaluate(at_standoff, push, travel[m])
+            checked.append(push)
             if best is None or push.score > best.score:
                 best = push
-        return best
+        return best if pick is None or not checked else pick(checked)
 
     def recheck(self, state: np.ndarray, push: Push) -> Push | None:
         """Re-choose the depth of ``push`` from the real ``state`` (7,) on arrival; None if no
