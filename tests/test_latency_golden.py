@@ -24,7 +24,7 @@ import torch
 
 import coursekit
 
-pytestmark = pytest.mark.usefixtures("one_torch_thread")
+pytestmark = [pytest.mark.usefixtures("one_torch_thread"), pytest.mark.slow]  # ~2 min on 2 busy cores
 CKPT = Path(coursekit.__file__).parent / "checkpoints"
 GOLDEN = Path(__file__).parent / "golden" / "latency.npz"
 HEADS = {"dp": "pusht_diffusion_state", "flow": "pusht_flow_state", "act": "act_pusht"}
@@ -72,7 +72,6 @@ def load_heads() -> dict:
 def guided_chunk(policies: dict, name: str) -> np.ndarray:
     """One guided chunk (2, Tp, Da) of case ``name``: a previous chunk shifted 20 px as the target."""
     from coursekit.execution.rtc import rtc_weights
-    from coursekit.policies.inpainting import predict_inpainted
 
     head, sampling, frozen, weights, options = CHUNKS[name]
     policy = policies[head]
@@ -82,17 +81,20 @@ def guided_chunk(policies: dict, name: str) -> np.ndarray:
     n = c.horizon - (c.n_obs_steps - 1)
     target = prev[:, c.n_obs_steps - 1:] + np.array([20.0, -10.0])  # (2, n, Da)
     w = np.zeros(n) if weights is None else rtc_weights(*weights)
-    return predict_inpainted(policy, obs, target, w, frozen=frozen, generator=torch.Generator().manual_seed(2),
-                             **options, **sampling)
+    return policy.predict_inpainted(obs, target, w, frozen=frozen, generator=torch.Generator().manual_seed(2),
+                                    **options, **sampling)
 
 
 def delayed_episodes(policies: dict, name: str) -> dict[str, np.ndarray]:
     """Seeded PushT episodes of case ``name``: what the executed actions, scores and switches were."""
-    from coursekit.evaluate.delayed import evaluate_delayed, smoothness
+    from coursekit.evaluate import evaluate, make_adapter, smoothness
+    from coursekit.execution.rtc import STRATEGIES
 
     head, strategy, d, sampling, options = EPISODES[name]
-    r = evaluate_delayed(policies[head], "pusht", strategy, d, SEEDS, seed=3, sampling=sampling, max_steps=STEPS,
-                         record=True, **options)
+    policy = policies[head]
+    r = evaluate(policy, make_adapter("pusht", policy), SEEDS, seed=3, sampling=sampling, max_steps=STEPS,
+                 record=True, executor_cls=STRATEGIES[strategy], executor_options={"delay": d, **options},
+                 progress=False)
     smooth = smoothness(r.actions, r.info["switches"])
     return {"actions": r.actions, "states": r.states, "max_reward": r.max_reward, "success": r.success,
             "length": r.length, "switches": np.asarray(r.info["switches"]), "chunk_calls": np.asarray(r.chunk_calls),
