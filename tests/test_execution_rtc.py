@@ -205,3 +205,37 @@ def test_replace_prefix_carries_the_target_along_its_own_noise():
     np.testing.assert_array_equal(out[:, 1:3], target[:, :2].astype(out.dtype))
     with pytest.raises(ValueError, match="prefix"):
         policy.predict_inpainted(obs, target, np.zeros(5), prefix="paste")
+
+
+def test_unbatched_history_gives_one_chunk_with_the_frozen_prefix():
+    policy = tiny_dp()
+    obs = np.random.default_rng(2).uniform(0, 500, size=(2, 6)).astype(np.float32)  # (To, Do): no batch
+    target = np.random.default_rng(3).uniform(0, 500, size=(1, 5, 2))
+    kw = {"frozen": 2, "generator": torch.Generator().manual_seed(4)}
+    one = policy.predict_inpainted(obs, target, rtc_weights(5, 2, 5), **kw)
+    kw["generator"] = torch.Generator().manual_seed(4)
+    batched = policy.predict_inpainted(obs[None], target, rtc_weights(5, 2, 5), **kw)
+    assert one.shape == (16, 2)
+    np.testing.assert_array_equal(one, batched[0])
+    np.testing.assert_array_equal(one[1:3], target[0, :2].astype(one.dtype))
+
+
+def test_the_guided_heads_run_each_policys_own_step():
+    """With g = 0 a head's step IS its policy's sampler step: DDIM/DDPM's ``sampler.step``, flow's ``euler_step``."""
+    from coursekit.diffusion import DDPMSampler
+    from coursekit.flow.sampler import euler_step
+
+    policy, cond = tiny_dp(), torch.randn(2, 12)
+    x, gen = torch.randn(2, 16, 2), torch.Generator().manual_seed(0)
+    head = policy.guided_head(cond, torch.Generator().manual_seed(1), sampler="ddpm", num_inference_steps=4)
+    _, eps = head.clean(x, 1)
+    want = DDPMSampler(policy.schedule, 4).step(eps, head.timesteps[1], x, generator=torch.Generator().manual_seed(1))
+    torch.testing.assert_close(head.step(x, 1, eps, torch.zeros_like(x), 5.0), want, rtol=0, atol=0)
+    flow = flow_from_dp(tiny_dp())
+    euler = flow.guided_head(cond, gen)
+    _, v = euler.clean(x, 2)
+    t, t_next = euler.grid[2], euler.grid[3]  # 0.6, 0.4 of the Euler-5 grid
+    torch.testing.assert_close(euler.step(x, 2, v, None, 5.0), euler_step(flow.velocity, x, t, t_next - t, cond),
+                               rtol=0, atol=0)
+    with pytest.raises(ValueError, match="Euler"):
+        flow.guided_head(cond, gen, sampler="midpoint")

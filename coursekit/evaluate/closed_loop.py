@@ -150,14 +150,11 @@ def evaluate(policy: Any, adapter: TaskAdapter, seeds: Sequence[int], *, max_ste
         sampling: the policy's sampling options (diffusion: sampler, num_inference_steps), checked first.
         seed: seeds the generator of the policy's sampling noise (the evaluation is deterministic).
         executor_cls: replaces the policy's default executor class (built with ``from_spec``), e.g. a
-            student's class or a delayed executor of chapter 11 (``coursekit.execution.rtc.STRATEGIES``).
-        executor_options: more keywords for ``from_spec``: a delayed executor's ``delay`` d, RTC's
-            ``schedule``, ``max_guidance`` and ``prefix``. ``executor_factory``: ``predict_chunk ->
-            executor``, full control instead of both.
+            student's or a delayed one of chapter 11 (``coursekit.execution.rtc.STRATEGIES``);
+            ``executor_options``: its other ``from_spec`` keywords (``delay``; RTC's ``schedule``,
+            ``max_guidance``, ``prefix``); ``executor_factory``: ``predict_chunk -> executor`` instead.
         record: keep per-step states and actions (always on when the task's metrics need them).
-
-    ``result.info`` names the executor and its options; a delayed executor adds its chunk switch
-    steps (``switches``, with ``record``), real-time chunking its guided calls and their seconds.
+    ``result.info`` names the executor and its options, and what a delayed one logged (:func:`_executor_log`).
     """
     import torch
 
@@ -170,16 +167,16 @@ def evaluate(policy: Any, adapter: TaskAdapter, seeds: Sequence[int], *, max_ste
     generator = torch.Generator().manual_seed(int(seed))
     options = dict(executor_options or {})
     guided = _guided_sampler(policy, executor_cls, generator, sampling)
+    extra = {"predict_inpainted": guided} if guided is not None else {}
     policy.eval()
     policy.reset()
 
     def predict_chunk(obs_history: Any) -> Any:
         return policy.predict_chunk(obs_history, generator=generator, **sampling)
 
-    made: list[Any] = []
+    made: list[Any] = []  # the executor rollout builds, for its logs
 
     def factory(pc: Callable[[Any], Any]) -> Any:
-        extra = {"predict_inpainted": guided} if guided is not None else {}
         made.append(policy.make_executor(pc, executor_cls=executor_cls, **options, **extra))
         return made[-1]
 
@@ -192,12 +189,18 @@ def evaluate(policy: Any, adapter: TaskAdapter, seeds: Sequence[int], *, max_ste
                         "sampling_seed": seed, "n_action_steps": spec.n_action_steps,
                         "temporal_ensembling": spec.temporal_ensembling,
                         "ensemble_decay": spec.ensemble_decay if spec.temporal_ensembling else None,
-                        **described, **options, **adapter.metrics(result)})
-    if guided is not None:
-        result.info.update({"guided_calls": guided.calls, "guided_seconds": round(guided.seconds, 3)})
-    if record and made and hasattr(made[-1], "switches"):
-        result.info["switches"] = list(made[-1].switches)
+                        **described, **options, **adapter.metrics(result), **_executor_log(made, guided, record)})
     return result
+
+
+def _executor_log(made: list[Any], guided: _GuidedSampler | None, record: bool) -> dict[str, Any]:
+    """A delayed executor's chunk switch steps (``switches``, when recording); RTC's guided calls and seconds."""
+    log: dict[str, Any] = {}
+    if record and made and hasattr(made[-1], "switches"):
+        log["switches"] = list(made[-1].switches)
+    if guided is not None:
+        log.update({"guided_calls": guided.calls, "guided_seconds": round(guided.seconds, 3)})
+    return log
 
 
 class _GuidedSampler:

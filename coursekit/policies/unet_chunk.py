@@ -296,7 +296,6 @@ class IterativeUNetPolicy(UNetChunkPolicy):
 
         chunk = self._sample_chunk(obs_history, draw)
         if frozen:  # the committed actions, exactly (chunk (B, Tp, Da), or (Tp, Da) for an unbatched history)
-            rows = (Ellipsis, slice(offset, offset + frozen), slice(None)) if chunk.ndim == 3 else (slice(offset, offset + frozen),)
-            src = y[..., :frozen, :] if chunk.ndim == 3 else y[0, :frozen]
-            chunk[rows] = src if isinstance(chunk, np.ndarray) else chunk.new_tensor(src)
+            src = y[:, :frozen] if chunk.ndim == 3 else y[0, :frozen]  # (B, frozen, Da) or (frozen, Da)
+            chunk[..., offset:offset + frozen, :] = src if isinstance(chunk, np.ndarray) else chunk.new_tensor(src)
         return chunk
