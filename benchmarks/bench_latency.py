@@ -6,8 +6,9 @@ Parts (``--only``; default: both):
   at each control rate (PushT 10 Hz, arm pair 50 Hz), and ms per action with the head's own executor;
   RTC's guided sampler is timed too (it adds a backward pass per step).
 - ``curves``: the score of each (head, strategy, d) on held-out seeds with
-  :func:`coursekit.evaluate.delayed.evaluate_delayed`, plus the smoothness of the executed actions
-  (mean jump at chunk switches, largest jerk). PushT: mean of max coverage with a bootstrap 95 %
+  :func:`coursekit.evaluate.evaluate` and the strategy's executor (``coursekit.execution.rtc.STRATEGIES``),
+  plus the smoothness of the executed actions (:func:`coursekit.evaluate.smoothness`: mean jump at
+  chunk switches, largest jerk). PushT: mean of max coverage with a bootstrap 95 %
   interval; transfer cube: strict success with a Wilson interval.
 
 The protocol is 200 held-out seeds (100000-100199) per point for d in {0, 1, 2, 4, 8}. Every point
@@ -33,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.results import record
+from coursekit.execution.rtc import STRATEGIES
 
 ROOT = Path(__file__).resolve().parent.parent
 CKPT = ROOT / "coursekit" / "checkpoints"
@@ -47,7 +49,7 @@ HEADS = {  # name -> (checkpoint dir, task, sampling options, label)
     "dp-cube": ("dp_transfer_cube", "transfer_cube", {}, "transfer cube DP DDIM-10"),
 }
 DELAYS = (0, 1, 2, 4, 8)
-STRATEGY_NAMES = ("sync", "async", "ensemble", "rtc")
+STRATEGY_NAMES = tuple(STRATEGIES)  # sync, async, ensemble, rtc
 
 
 def _csv(text: str, allowed: tuple | None, kind: type = str) -> list:
@@ -69,7 +71,7 @@ def load_head(name: str):
 
 
 def part_latency(args: argparse.Namespace) -> None:
-    from coursekit.evaluate.delayed import chunk_latency_ms, latency_delay
+    from coursekit.evaluate.latency import chunk_latency_ms, latency_delay
 
     for name in args.heads:
         policy = load_head(name)
@@ -88,7 +90,7 @@ def part_latency(args: argparse.Namespace) -> None:
         record(SECTION, f"{label}: ms per chunk", round(ms, 1), "ms", f"{COMMAND} --only latency", note=note)
         record(SECTION, f"{label}: ms per action (own executor)", round(per_action, 2), "ms",
                f"{COMMAND} --only latency", note=note)
-        if policy.policy_type in ("diffusion", "flow"):
+        if hasattr(policy, "predict_inpainted"):  # an iterative sampler RTC can guide
             g = chunk_latency_ms(policy, task, sampling=sampling, repeats=args.repeats, guided=True)
             print(f"{label} RTC-guided: {g:.1f} ms per chunk ({g / ms:.1f}x)")
             record(SECTION, f"{label}: ms per RTC-guided chunk", round(g, 1), "ms", f"{COMMAND} --only latency",
@@ -108,11 +110,12 @@ def _block_file(cache: Path, name: str, strategy: str, d: int, start: int, n: in
 
 
 def run_block(policy, name: str, strategy: str, d: int, seeds: list[int], args: argparse.Namespace) -> dict:
-    from coursekit.evaluate.delayed import evaluate_delayed, smoothness
+    from coursekit.evaluate import evaluate, make_adapter, smoothness
 
     _, task, sampling, _ = HEADS[name]
-    r = evaluate_delayed(policy, task, strategy, d, seeds, seed=args.seed, sampling=sampling, record=True,
-                         max_guidance=args.max_guidance, prefix=args.prefix, progress=False)
+    options = {"delay": d, **({"max_guidance": args.max_guidance, "prefix": args.prefix} if strategy == "rtc" else {})}
+    r = evaluate(policy, make_adapter(task, policy), seeds, seed=args.seed, sampling=sampling, record=True,
+                 executor_cls=STRATEGIES[strategy], executor_options=options, progress=False)
     out = {"seeds": seeds, "max_reward": r.max_reward.tolist(), "success": r.success.astype(int).tolist(),
            "smooth": smoothness(r.actions, r.info["switches"]), "seconds": r.seconds}
     if task != "pusht":
@@ -134,8 +137,8 @@ def part_curves(args: argparse.Namespace) -> None:
             continue
         _, task, _, label = HEADS[name]
         for strategy in args.strategies:
-            if strategy == "rtc" and policy.policy_type not in ("diffusion", "flow"):
-                continue
+            if strategy == "rtc" and not hasattr(policy, "predict_inpainted"):
+                continue  # RTC guides an iterative sampler: not ACT
             for d in args.d:
                 parts = []
                 for b in blocks:

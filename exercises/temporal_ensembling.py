@@ -13,7 +13,7 @@ from collections.abc import Callable
 from typing import Any
 import numpy as np
 
-from coursekit.execution.ensembling import _to_numpy
+from coursekit.execution.receding import to_numpy
 
 
 class TemporalEnsemble:
@@ -60,7 +60,7 @@ class TemporalEnsemble:
 
     def reset(self, obs: Any) -> None:
         """Start an episode: history = To copies of ``obs`` (B, Do); forget every chunk."""
-        obs = _to_numpy(obs)
+        obs = to_numpy(obs)
         if obs.ndim != 2:
             raise ValueError(f"reset expects obs of shape (B, Do), got {obs.shape}")
         self._history = np.repeat(obs[:, None, :], self.n_obs_steps, axis=1)  # (B, To, Do)
@@ -71,7 +71,7 @@ class TemporalEnsemble:
         """Shift ``obs`` (B, Do) into the history and return it, (B, To, Do)."""
         if self._history is None:
             raise ValueError("act() called before reset(obs): call reset with the first observation")
-        obs = _to_numpy(obs)
+        obs = to_numpy(obs)
         if obs.shape != (self._history.shape[0], self._history.shape[2]):
             raise ValueError(f"act expects obs of shape {(self._history.shape[0], self._history.shape[2])} (B, Do), got {obs.shape}")
         self._history = np.concatenate([self._history[:, 1:], obs[:, None, :]], axis=1)  # (B, To, Do)
@@ -89,7 +89,7 @@ class TemporalEnsemble:
         sum_i w_i * pred_i, shape (B, Da). ``self.t`` is advanced after your block.
         """
         history = self._observe(obs)
-        chunk = _to_numpy(self.predict_chunk(history))  # (B, Tp, Da)
+        chunk = to_numpy(self.predict_chunk(history))  # (B, Tp, Da)
         if chunk.ndim != 3 or chunk.shape[0] != history.shape[0] or chunk.shape[1] <= self.start:
             raise ValueError(f"predict_chunk must return (B={history.shape[0]}, Tp > start={self.start}, Da), got {chunk.shape}")
         raise NotImplementedError('Exercise 8.1 (temporal_ensembling): implement TemporalEnsemble.act; see its docstring')

@@ -1,4 +1,4 @@
-"""Evaluation under delay: the glue (strategies by name, seeds, smoothness figures, latency -> d)."""
+"""Evaluation under delay: a delayed executor through evaluate(), smoothness figures, latency -> d."""
 
 from __future__ import annotations
 
@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 
 import coursekit
-from coursekit.evaluate.delayed import STRATEGIES, check_strategy, evaluate_delayed, latency_delay, smoothness
+from coursekit.evaluate import evaluate, latency_delay, make_adapter, rms_jerk, smoothness
+from coursekit.execution.delay import AsyncChunking, DelayedEnsemble, Synchronous
+from coursekit.execution.rtc import STRATEGIES, RealTimeChunking
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 CKPT = Path(coursekit.__file__).parent / "checkpoints"
@@ -32,6 +34,13 @@ def test_smoothness_on_a_hand_built_trajectory():
         smoothness(np.zeros((4, 2)))
 
 
+def test_largest_and_rms_jerk_reduce_the_same_third_difference():
+    a = np.random.default_rng(0).normal(size=(3, 20, 2))
+    third = np.diff(a, n=3, axis=1)  # numpy's own third difference, (N, T-3, Da)
+    np.testing.assert_allclose(smoothness(a)["max_jerk"], np.linalg.norm(third, axis=-1).max(axis=1).mean(), rtol=1e-12)
+    np.testing.assert_allclose(rms_jerk(a), np.sqrt((third ** 2).mean(axis=(1, 2))), rtol=1e-12)
+
+
 def test_latency_to_delay_at_each_control_rate():
     assert latency_delay(95.0, "pusht") == 1 and latency_delay(150.0, "pusht") == 2
     assert latency_delay(95.0, "transfer_cube") == 5
@@ -39,24 +48,40 @@ def test_latency_to_delay_at_each_control_rate():
         latency_delay(10.0, "cartpole")
 
 
-def test_strategy_checks(dp):
-    assert set(STRATEGIES) == {"sync", "async", "ensemble", "rtc"}
-    with pytest.raises(ValueError, match="unknown strategy"):
-        check_strategy("hopeful", dp)
-    act_like = type("P", (), {"policy_type": "act"})()
-    with pytest.raises(ValueError, match="diffusion or flow"):
-        check_strategy("rtc", act_like)
+def test_strategies_and_bad_options(dp):
+    assert STRATEGIES == {"sync": Synchronous, "async": AsyncChunking, "ensemble": DelayedEnsemble,
+                          "rtc": RealTimeChunking}
+    adapter = make_adapter("pusht", dp)
     with pytest.raises(ValueError, match="delay"):
-        evaluate_delayed(dp, "pusht", "async", -1, [100000])
+        evaluate(dp, adapter, [100000], executor_cls=AsyncChunking, executor_options={"delay": -1}, progress=False)
     with pytest.raises(ValueError, match="sampling option"):
-        evaluate_delayed(dp, "pusht", "async", 1, [100000], sampling={"temperature": 2.0})
+        evaluate(dp, adapter, [100000], executor_cls=AsyncChunking, executor_options={"delay": 1},
+                 sampling={"temperature": 2.0}, progress=False)
+    with pytest.raises(ValueError, match="prefix"):
+        evaluate(dp, adapter, [100000], executor_cls=RealTimeChunking, executor_options={"delay": 1, "prefix": "paste"},
+                 progress=False)
+
+
+def test_rtc_needs_a_policy_with_a_guided_sampler():
+    from coursekit.checkpoint import load_checkpoint
+
+    act = load_checkpoint(CKPT / "act_pusht", device="cpu")
+    regression = load_checkpoint(CKPT / "pusht_regression_state", device="cpu")
+    for policy in (act, regression):
+        assert not hasattr(policy, "predict_inpainted")
+        with pytest.raises(ValueError, match="diffusion or flow policy"):
+            evaluate(policy, make_adapter("pusht", policy), [100000], executor_cls=RealTimeChunking,
+                     executor_options={"delay": 2}, progress=False)
 
 
 @pytest.mark.parametrize("strategy", ["sync", "rtc"])
-def test_evaluate_delayed_is_deterministic_and_labelled(dp, strategy):
-    seeds = [100000, 100001]
-    r1 = evaluate_delayed(dp, "pusht", strategy, 2, seeds, seed=3, max_steps=24, record=True)
-    r2 = evaluate_delayed(dp, "pusht", strategy, 2, seeds, seed=3, max_steps=24, record=True)
-    np.testing.assert_array_equal(r1.actions, r2.actions)
-    assert r1.info["strategy"] == strategy and r1.info["delay"] == 2 and r1.info["switches"][0] == 0
-    assert (r1.info["guided_calls"] > 0) == (strategy == "rtc")
+def test_delayed_evaluation_is_deterministic_and_labelled(dp, strategy):
+    seeds, adapter = [100000, 100001], make_adapter("pusht", dp)
+    runs = [evaluate(dp, adapter, seeds, seed=3, max_steps=24, record=True, executor_cls=STRATEGIES[strategy],
+                     executor_options={"delay": 2}, progress=False) for _ in range(2)]
+    np.testing.assert_array_equal(runs[0].actions, runs[1].actions)
+    info = runs[0].info
+    assert info["executor"] == STRATEGIES[strategy].__name__ and info["delay"] == 2 and info["switches"][0] == 0
+    assert ("guided_calls" in info) == (strategy == "rtc")
+    if strategy == "rtc":
+        assert info["guided_calls"] > 0

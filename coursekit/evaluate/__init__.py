@@ -5,8 +5,11 @@
     pusht.py     PushTAdapter, evaluate_pusht (Diffusion Policy's mean-of-max protocol)
     aloha.py     ArmPairAdapter, evaluate_aloha (ACT's stage rates + strict final-state success)
     tasks.py     TASKS, make_adapter(task, policy), task_of(policy, dataset_meta)
-    behaviour.py stalled_steps / still_steps (PushT hesitation), rms_jerk (smoothness of executed actions)
-    delayed.py   evaluate_delayed (chapter 11: any strategy under an inference delay d), smoothness, chunk latency
+    behaviour.py stalled_steps / still_steps (PushT hesitation), jerk / rms_jerk / smoothness (of executed actions)
+    latency.py   chunk_latency_ms (ms per chunk on this CPU), latency_delay (the delay d it means at a task's rate)
+
+Chapter 11's delayed execution is an executor choice of ``evaluate`` (``executor_cls`` from
+``coursekit.execution.rtc.STRATEGIES``, ``executor_options={"delay": d}``), not another loop.
 """
 
 from __future__ import annotations
@@ -31,12 +34,11 @@ _LAZY = {
     "make_adapter": "coursekit.evaluate.tasks",
     "stalled_steps": "coursekit.evaluate.behaviour",
     "still_steps": "coursekit.evaluate.behaviour",
+    "jerk": "coursekit.evaluate.behaviour",
     "rms_jerk": "coursekit.evaluate.behaviour",
-    "evaluate_delayed": "coursekit.evaluate.delayed",
-    "smoothness": "coursekit.evaluate.delayed",
-    "chunk_latency_ms": "coursekit.evaluate.delayed",
-    "latency_delay": "coursekit.evaluate.delayed",
-    "STRATEGIES": "coursekit.evaluate.delayed",
+    "smoothness": "coursekit.evaluate.behaviour",
+    "chunk_latency_ms": "coursekit.evaluate.latency",
+    "latency_delay": "coursekit.evaluate.latency",
 }
 __all__ = sorted(_LAZY)
 __getattr__, __dir__ = lazy_loader(__name__, _LAZY)

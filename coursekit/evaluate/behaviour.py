@@ -4,15 +4,20 @@
   failure Chi et al. (2023, Sec. 1 and Fig. 3) predict for a regressor that averages two routes
   round the T: the pusher is touching (or within ``contact_gap`` of) the T, it hardly moves, and
   the T does not move either. Pushing (the T moves) and travelling (the pusher moves) do not count.
-- :func:`rms_jerk`: the root-mean-square third difference of an executed action trajectory,
-  a_{t+1} - 3 a_t + 3 a_{t-1} - a_{t-2} (units of the action per step^3): the smoothness figure
-  of temporal ensembling (Zhao et al. 2023, Sec. IV-A says ensembling gives smooth motion;
-  this puts a number on it).
+- :func:`jerk`: THE jerk of an executed action trajectory, its third difference
+  a_{t+1} - 3 a_t + 3 a_{t-1} - a_{t-2} (units of the action per step^3). Two figures reduce it:
+  :func:`rms_jerk`, its root mean square over an episode, the smoothness figure of temporal
+  ensembling (Zhao et al. 2023, Sec. IV-A says ensembling gives smooth motion; this puts a number
+  on it), and the largest jerk of :func:`smoothness`.
+- :func:`smoothness` (chapter 11): what happens at chunk switches under an inference delay: the
+  jump there against the step elsewhere, the largest step and the largest jerk.
 
-Both read the arrays :class:`~coursekit.evaluate.result.EvalResult` records (``record=True``).
+All read the arrays :class:`~coursekit.evaluate.result.EvalResult` records (``record=True``).
 """
 
 from __future__ import annotations
+
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -71,6 +76,14 @@ def _pusher_in_block_frame(states: np.ndarray) -> np.ndarray:
     return np.stack([d[..., 0] * c + d[..., 1] * s, -d[..., 0] * s + d[..., 1] * c], axis=-1)
 
 
+def jerk(actions: np.ndarray) -> np.ndarray:
+    """Third difference (N, T - 3, Da) of executed actions (N, T >= 4, Da): a_t - 3 a_{t-1} + 3 a_{t-2} - a_{t-3}."""
+    a = np.asarray(actions, dtype=np.float64)
+    if a.ndim != 3 or a.shape[1] < 4:
+        raise ValueError(f"actions must be (N, T >= 4, Da), got shape {a.shape}")
+    return a[:, 3:] - 3 * a[:, 2:-1] + 3 * a[:, 1:-2] - a[:, :-3]  # (N, T-3, Da)
+
+
 def rms_jerk(actions: np.ndarray, length: np.ndarray | None = None, dims=None) -> np.ndarray:
     """RMS third difference (N,) of executed actions (N, T, Da) over each episode's first ``length`` steps.
 
@@ -84,7 +97,30 @@ def rms_jerk(actions: np.ndarray, length: np.ndarray | None = None, dims=None) -
     n = np.full(a.shape[0], a.shape[1]) if length is None else np.asarray(length)
     if n.shape != (a.shape[0],) or (n < 4).any() or (n > a.shape[1]).any():
         raise ValueError(f"length must be (N,) = ({a.shape[0]},) step counts in [4, {a.shape[1]}], got {n!r}")
-    jerk = a[:, 3:] - 3 * a[:, 2:-1] + 3 * a[:, 1:-2] - a[:, :-3]  # (N, T-3, Da)
     valid = np.arange(a.shape[1] - 3)[None, :] < (n - 3)[:, None]  # (N, T-3)
-    sq = ((jerk**2).mean(-1) * valid).sum(1) / valid.sum(1)  # (N,)
+    sq = ((jerk(a) ** 2).mean(-1) * valid).sum(1) / valid.sum(1)  # (N,)
     return np.sqrt(sq)
+
+
+def smoothness(actions: np.ndarray, switches: Sequence[int] = ()) -> dict[str, float]:
+    """Smoothness of executed actions (N, T, Da): means over episodes of per-episode figures.
+
+    - max_step: max_t ||a_t - a_{t-1}|| (action units per step);
+    - switch_jump: mean ||a_t - a_{t-1}|| over the chunk switch steps t > 0 (the discontinuity);
+    - other_step: mean ||a_t - a_{t-1}|| over every other step (what a switch is compared with);
+    - max_jerk: max_t ||jerk_t|| (:func:`jerk`, units per step^3).
+
+    ``switches``: the steps at which a new chunk took over (a delayed executor's ``switches``).
+    """
+    a = np.asarray(actions, dtype=np.float64)
+    if a.ndim != 3 or a.shape[1] < 4:
+        raise ValueError(f"actions must be (N, T >= 4, Da), got {a.shape}")
+    step = np.linalg.norm(np.diff(a, axis=1), axis=-1)  # (N, T-1): step t -> index t - 1
+    largest_jerk = np.linalg.norm(jerk(a), axis=-1).max(axis=1)  # (N,)
+    at_switch = np.zeros(step.shape[1], dtype=bool)
+    idx = [t - 1 for t in switches if 0 < t < a.shape[1]]
+    at_switch[idx] = True
+    return {"max_step": float(step.max(axis=1).mean()),
+            "switch_jump": float(step[:, at_switch].mean()) if at_switch.any() else float("nan"),
+            "other_step": float(step[:, ~at_switch].mean()) if (~at_switch).any() else float("nan"),
+            "max_jerk": float(largest_jerk.mean())}

@@ -7,6 +7,13 @@ on one task, described by a :class:`TaskAdapter` (``coursekit.evaluate.pusht``,
 ``coursekit.evaluate.aloha``): how to build the env, read observations as policy inputs,
 record a state per step and score an episode. Everything is seeded, so a run is reproducible.
 
+Execution under an inference delay (chapter 11) is an executor choice like any other::
+
+    evaluate(policy, adapter, seeds, executor_cls=STRATEGIES["rtc"], executor_options={"delay": 2})
+
+(:mod:`coursekit.execution.delay`, :mod:`coursekit.execution.rtc`); real-time chunking also
+gets the policy's guided sampler, bound to the same noise generator as every other chunk.
+
 Adding a task is one adapter class and one entry in ``coursekit.evaluate.tasks.TASKS``.
 """
 
@@ -79,10 +86,10 @@ def rollout(predict_chunk: Callable[[Any], Any], make_env: Callable[[], Any], ob
 
     state_fn = state_fn or (lambda env: np.asarray(env.unwrapped.get_state(), dtype=np.float64))
     start = time.perf_counter()
+    executor = executor_factory(timed)  # first: a bad executor option fails before any env is built
     envs = [make_env() for _ in seeds]
     n = len(envs)
     obs = [env.reset(seed=int(s))[0] for env, s in zip(envs, seeds)]
-    executor = executor_factory(timed)
     executor.reset(obs_fn(obs))
     executor_name = type(executor).__name__
     max_reward = np.zeros(n)
@@ -129,6 +136,7 @@ def rollout(predict_chunk: Callable[[Any], Any], make_env: Callable[[], Any], ob
 
 def evaluate(policy: Any, adapter: TaskAdapter, seeds: Sequence[int], *, max_steps: int | None = None,
              sampling: Mapping[str, Any] | None = None, seed: int = 0, executor_cls: Any = None,
+             executor_options: Mapping[str, Any] | None = None,
              executor_factory: Callable[[Callable[[Any], Any]], Any] | None = None,
              dataset_meta: dict[str, Any] | None = None, progress: bool = True, record: bool = False) -> EvalResult:
     """Run ``policy`` on ``adapter``'s task from each of ``seeds``; the one evaluation flow of every policy.
@@ -141,9 +149,12 @@ def evaluate(policy: Any, adapter: TaskAdapter, seeds: Sequence[int], *, max_ste
         max_steps: steps per episode (default: the task's protocol).
         sampling: the policy's sampling options (diffusion: sampler, num_inference_steps), checked first.
         seed: seeds the generator of the policy's sampling noise (the evaluation is deterministic).
-        executor_cls: replaces the policy's default executor class (built with ``from_spec``);
-            executor_factory: ``predict_chunk -> executor``, full control instead.
+        executor_cls: replaces the policy's default executor class (built with ``from_spec``), e.g. a
+            student's or a delayed one of chapter 11 (``coursekit.execution.rtc.STRATEGIES``);
+            ``executor_options``: its other ``from_spec`` keywords (``delay``; RTC's ``schedule``,
+            ``max_guidance``, ``prefix``); ``executor_factory``: ``predict_chunk -> executor`` instead.
         record: keep per-step states and actions (always on when the task's metrics need them).
+    ``result.info`` names the executor and its options, and what a delayed one logged (:func:`_executor_log`).
     """
     import torch
 
@@ -154,20 +165,67 @@ def evaluate(policy: Any, adapter: TaskAdapter, seeds: Sequence[int], *, max_ste
     check_seeds_disjoint(seeds, dataset_meta)
     max_steps = adapter.max_steps if max_steps is None else int(max_steps)
     generator = torch.Generator().manual_seed(int(seed))
+    options = dict(executor_options or {})
+    guided = _guided_sampler(policy, executor_cls, generator, sampling)
+    extra = {"predict_inpainted": guided} if guided is not None else {}
     policy.eval()
     policy.reset()
 
     def predict_chunk(obs_history: Any) -> Any:
         return policy.predict_chunk(obs_history, generator=generator, **sampling)
 
-    factory = executor_factory or (lambda pc: policy.make_executor(pc, executor_cls=executor_cls))
-    result = rollout(predict_chunk, lambda: adapter.make_env(max_steps), adapter.obs_fn, seeds, factory,
-                     max_steps=max_steps, progress=progress, record=record or adapter.record_always,
+    made: list[Any] = []  # the executor rollout builds, for its logs
+
+    def factory(pc: Callable[[Any], Any]) -> Any:
+        made.append(policy.make_executor(pc, executor_cls=executor_cls, **options, **extra))
+        return made[-1]
+
+    record = record or adapter.record_always
+    result = rollout(predict_chunk, lambda: adapter.make_env(max_steps), adapter.obs_fn, seeds,
+                     executor_factory or factory, max_steps=max_steps, progress=progress, record=record,
                      state_fn=adapter.state_fn, desc=f"eval {policy.policy_type} {adapter.task}")
     spec = policy.execution_spec()
     result.info.update({"policy_type": policy.policy_type, "task": adapter.task, "max_steps": max_steps,
                         "sampling_seed": seed, "n_action_steps": spec.n_action_steps,
                         "temporal_ensembling": spec.temporal_ensembling,
                         "ensemble_decay": spec.ensemble_decay if spec.temporal_ensembling else None,
-                        **described, **adapter.metrics(result)})
+                        **described, **options, **adapter.metrics(result), **_executor_log(made, guided, record)})
     return result
+
+
+def _executor_log(made: list[Any], guided: _GuidedSampler | None, record: bool) -> dict[str, Any]:
+    """A delayed executor's chunk switch steps (``switches``, when recording); RTC's guided calls and seconds."""
+    log: dict[str, Any] = {}
+    if record and made and hasattr(made[-1], "switches"):
+        log["switches"] = list(made[-1].switches)
+    if guided is not None:
+        log.update({"guided_calls": guided.calls, "guided_seconds": round(guided.seconds, 3)})
+    return log
+
+
+class _GuidedSampler:
+    """``policy.predict_inpainted`` bound to the evaluation's generator and sampling options, timed."""
+
+    def __init__(self, policy: Any, generator: Any, sampling: Mapping[str, Any]) -> None:
+        self.policy, self.generator, self.sampling = policy, generator, sampling
+        self.calls, self.seconds = 0, 0.0
+
+    def __call__(self, obs_history: Any, target: Any, weights: Any, **options: Any) -> Any:
+        t0 = time.perf_counter()
+        out = self.policy.predict_inpainted(obs_history, target, weights, generator=self.generator,
+                                            **options, **self.sampling)
+        self.seconds += time.perf_counter() - t0
+        self.calls += 1
+        return out
+
+
+def _guided_sampler(policy: Any, executor_cls: Any, generator: Any, sampling: Mapping[str, Any]) -> _GuidedSampler | None:
+    """The guided sampler real-time chunking needs (None for any other executor); refuses a policy without one."""
+    from coursekit.execution.rtc import RealTimeChunking
+
+    if not (isinstance(executor_cls, type) and issubclass(executor_cls, RealTimeChunking)):
+        return None
+    if not callable(getattr(policy, "predict_inpainted", None)):
+        raise ValueError(f"{executor_cls.__name__} inpaints during denoising/integration: it needs a diffusion or "
+                         f"flow policy (one with predict_inpainted), not {policy.policy_type!r}")
+    return _GuidedSampler(policy, generator, sampling)

@@ -8,7 +8,8 @@ check), and has ``reset(obs (B, ...))`` and ``act(obs (B, ...)) -> (B, Da)``:
 - :class:`TemporalEnsemble` (ACT): predict every step, average the overlapping chunks.
 - Under an inference delay of d steps (:mod:`coursekit.execution.delay`, chapter 11):
   :class:`Synchronous`, :class:`AsyncChunking`, :class:`DelayedEnsemble` and
-  :class:`RealTimeChunking` (:mod:`coursekit.execution.rtc`).
+  :class:`RealTimeChunking` (:mod:`coursekit.execution.rtc`, which also names the four in
+  ``STRATEGIES`` and holds RTC's guidance, shared by the diffusion and flow policies).
 
 Classes load lazily (``coursekit.execution.receding`` needs neither torch nor numpy at import).
 """
@@ -20,6 +21,7 @@ from coursekit.lazy import lazy_loader
 _LAZY = {
     "RecedingHorizon": "coursekit.execution.receding",
     "stack_history": "coursekit.execution.receding",
+    "to_numpy": "coursekit.execution.receding",
     "TemporalEnsemble": "coursekit.execution.ensembling",
     "ExecutionSpec": "coursekit.execution.spec",
     "check_horizons": "coursekit.execution.spec",
@@ -31,6 +33,7 @@ _LAZY = {
     "DelayedEnsemble": "coursekit.execution.delay",
     "RealTimeChunking": "coursekit.execution.rtc",
     "rtc_weights": "coursekit.execution.rtc",
+    "STRATEGIES": "coursekit.execution.rtc",
 }
 __all__ = sorted(_LAZY)
 __getattr__, __dir__ = lazy_loader(__name__, _LAZY)

@@ -44,7 +44,7 @@ from typing import Any
 
 import numpy as np
 
-from coursekit.execution.receding import batch_size_of, stack_history
+from coursekit.execution.receding import batch_size_of, stack_history, to_numpy
 
 CONTROL_HZ = {"pusht": 10.0, "transfer_cube": 50.0, "insertion": 50.0}
 """Control rate of each task in Hz (PushT 10 Hz; the arm pair 50 Hz, as in ALOHA)."""
@@ -254,13 +254,6 @@ class AsyncChunking(DelayedExecutor):
         # END SOLUTION
 
 
-def _to_numpy(x: Any) -> np.ndarray:
-    """A float64 numpy array from a numpy array or a torch tensor (without importing torch)."""
-    if hasattr(x, "detach"):
-        x = x.detach().cpu().numpy()
-    return np.asarray(x, dtype=np.float64)
-
-
 class DelayedEnsemble(DelayedExecutor):
     """Temporal ensembling (ACT) when every chunk arrives d steps late.
 
@@ -291,7 +284,7 @@ class DelayedEnsemble(DelayedExecutor):
     def _take_arrived(self) -> None:
         """Move an arrived chunk into the ensemble (as float64 numpy, like TemporalEnsemble)."""
         if self._receive():
-            self.current.actions = _to_numpy(self.current.actions)  # (B, L, Da)
+            self.current.actions = to_numpy(self.current.actions)  # (B, L, Da)
             self.chunks.append(self.current)
 
     def act(self, obs: Any) -> Any:

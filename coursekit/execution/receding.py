@@ -43,6 +43,15 @@ def stack_history(history: Sequence[Any]) -> Any:
     return np.stack(history, axis=1)  # (B, To, ...)
 
 
+def to_numpy(x: Any) -> Any:
+    """A float64 numpy array from a numpy array or a torch tensor (without importing torch)."""
+    import numpy as np
+
+    if hasattr(x, "detach"):
+        x = x.detach().cpu().numpy()
+    return np.asarray(x, dtype=np.float64)
+
+
 def batch_size_of(obs: Any) -> int:
     """B of an observation batch (B, ...) or of a dict of them."""
     if isinstance(obs, dict):

@@ -17,9 +17,37 @@ from the current iterate, and add the vector-Jacobian product
     g = (d x0_hat / d x)^T  W (Y - x0_hat)          (through the network, by autograd)
 
 to the update, with a guidance weight clipped at beta = 5 (RTC's choice). How g enters the
-update and the weight before clipping depend on the sampler (coursekit.policies.inpainting:
-DDIM on epsilon, Euler on velocity); this module holds what both share: the weights, the VJP,
-the sampling loop over a ``GuidedHead``, and the executor.
+update depends on the sampler:
+
+DDIM / DDPM on epsilon (Diffusion Policy; :func:`epsilon_guidance_scale`)::
+
+    x0_hat = (x_t - sqrt(1 - abar_t) eps) / sqrt(abar_t)              (unclipped: the clamp has no gradient)
+    eps'   = eps - sqrt(abar_t) * min(beta, 1 / sqrt(abar_t (1 - abar_t))) * g
+    x_prev = the policy's own sampler step with eps'                    (DDIM, or DDPM)
+
+Unclipped this is PiGDM exactly: score = -eps / sqrt(1 - abar_t), and PiGDM adds g / r_t^2 to
+the score with r_t^2 = 1 - abar_t, i.e. eps' = eps - g / sqrt(1 - abar_t). The clip is RTC's, on
+the same quantity RTC clips: rescaled, x_t is a flow iterate at tau = sqrt(abar) / (sqrt(abar) +
+sqrt(1 - abar)), where RTC's weight (1 - tau) / (tau r^2) equals 1 / sqrt(abar (1 - abar)).
+(Clipping 1 / r_t^2 itself instead would all but switch guidance off in the last, low-noise
+steps, where 1 / r_t^2 is in the hundreds and the chunk takes its final shape.)
+
+Euler on velocity (flow matching, pi0's convention: x_t = t e + (1 - t) a0, t = 1 noise, v = e - a0;
+:func:`velocity_guidance_weight`)::
+
+    x0_hat = x_t - t v
+    v'     = v - min(beta, ((1 - t)^2 + t^2) / ((1 - t) t)) * g
+    x_next = the policy's own Euler step with v',   dt = -1/N
+
+which is RTC's Algorithm 1 written in this convention (their tau = 1 - t runs toward the data,
+their velocity is -v, and (1 - tau) / (tau r^2) with r^2 = (1 - tau)^2 / (tau^2 + (1 - tau)^2)
+becomes the weight above; at t = 1 it is infinite and the clip takes over).
+
+This module holds all of RTC that does not depend on a network: the weights, the two guidance
+weights, the VJP, the sampling loop over a :class:`GuidedHead`, the executor, and the chapter's
+strategies by name. Each iterative policy provides its own head, built on its own sampler step
+(``DiffusionPolicy.guided_head``, ``FlowMatchingPolicy.guided_head``), and the shared
+``predict_inpainted`` (:class:`coursekit.policies.unet_chunk.IterativeUNetPolicy`) runs it.
 
 Deliberate choices: the frozen prefix is ALSO copied verbatim into the returned chunk (those
 actions are executed from the old chunk anyway, so the chunk says what really happens); with
@@ -35,12 +63,16 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from coursekit.execution.delay import AsyncChunking, _to_numpy
-from coursekit.execution.receding import stack_history
+from coursekit.execution.delay import AsyncChunking, DelayedEnsemble, Synchronous
+from coursekit.execution.receding import stack_history, to_numpy
 
 MAX_GUIDANCE = 5.0
 """beta: RTC clips the guidance weight at 5."""
 WEIGHT_SCHEDULES = ("exp", "hard")
+"""Guidance weights: "exp" (RTC's soft decay over the overlap) or "hard" (the frozen prefix only)."""
+PREFIX_MODES = ("guide", "replace")
+"""The frozen prefix: "guide" (RTC: held by guidance with W = 1) or "replace" (also written into the
+iterate at every step, at that step's noise level: Diffusion Policy's inpainting, Chi et al. 2023)."""
 
 
 def rtc_weights(n: int, delay: int, overlap: int, schedule: str = "exp") -> np.ndarray:
@@ -84,8 +116,22 @@ def guidance_vjp(clean_fn: Callable[[Any], tuple[Any, Any]], x: Any, target: Any
     return x0_hat.detach(), out.detach(), g
 
 
+def epsilon_guidance_scale(abar: float, max_guidance: float) -> float:
+    """sqrt(abar) * min(beta, 1 / sqrt(abar (1 - abar))): the factor of g subtracted from eps (module docstring)."""
+    if abar >= 1.0:
+        return 0.0
+    return abar ** 0.5 * min(float(max_guidance), 1.0 / (abar * (1.0 - abar)) ** 0.5)
+
+
+def velocity_guidance_weight(t: float, max_guidance: float) -> float:
+    """min(beta, ((1 - t)^2 + t^2) / ((1 - t) t)): the factor of g subtracted from v; infinite (so beta) at t = 1."""
+    if t >= 1.0 or t <= 0.0:
+        return float(max_guidance)
+    return min(float(max_guidance), ((1.0 - t) ** 2 + t ** 2) / ((1.0 - t) * t))
+
+
 class GuidedHead(Protocol):
-    """A sampler seen one step at a time: what DDIM (diffusion) and Euler (flow) both provide."""
+    """A policy's sampler seen one step at a time: what DDIM/DDPM (diffusion) and Euler (flow) both provide."""
 
     num_steps: int
     """Network calls from noise to a chunk."""
@@ -134,29 +180,39 @@ class RealTimeChunking(AsyncChunking):
     Same schedule as :class:`~coursekit.execution.delay.AsyncChunking`; at each request after the
     first, the target Y is the current chunk's actions for steps r, r + 1, ... (held past its
     end), the weights come from :func:`rtc_weights`, and ``predict_inpainted(obs_history,
-    target (B, n, Da), weights (n,), frozen=d) -> (B, Tp, Da)`` generates the chunk (index
-    ``start + j`` of the chunk is aligned with ``target[:, j]``). Its first d actions are then set
-    to the committed ones exactly.
+    target (B, n, Da), weights (n,), frozen=d, max_guidance=beta, prefix=...) -> (B, Tp, Da)``
+    generates the chunk (index ``start + j`` of the chunk is aligned with ``target[:, j]``). Its
+    first d actions are then set to the committed ones exactly.
 
     Args (besides DelayedExecutor's):
-        predict_inpainted: the guided predictor (coursekit.policies.inpainting.predict_inpainted
-            bound to a policy); required.
+        predict_inpainted: the guided sampler, a policy's ``predict_inpainted`` bound to its
+            noise generator and sampling options (``coursekit.evaluate.evaluate`` binds it); required.
         schedule: "exp" (RTC) or "hard" (frozen prefix only).
+        max_guidance: beta, the clip of the guidance weight (RTC: 5).
+        prefix: "guide" (RTC) or "replace" (Diffusion Policy's inpainting), see :data:`PREFIX_MODES`.
         guide_without_delay: guide with the soft weights also when d = 0 (default False: d = 0
             is plain receding horizon).
     """
 
     def __init__(self, predict_chunk: Callable[[Any], Any], n_obs_steps: int = 2, n_action_steps: int = 8,
                  delay: int = 0, start: int | None = None, predict_inpainted: Callable[..., Any] | None = None,
-                 schedule: str = "exp", guide_without_delay: bool = False) -> None:
+                 schedule: str = "exp", max_guidance: float = MAX_GUIDANCE, prefix: str = "guide",
+                 guide_without_delay: bool = False) -> None:
         super().__init__(predict_chunk, n_obs_steps, n_action_steps, delay, start)
         if not callable(predict_inpainted):
-            raise ValueError("RealTimeChunking needs predict_inpainted(obs_history, target, weights, frozen=d) "
+            raise ValueError("RealTimeChunking needs predict_inpainted(obs_history, target, weights, frozen=d, ...) "
                              f"(a diffusion or flow policy's guided sampler), got {predict_inpainted!r}")
         if schedule not in WEIGHT_SCHEDULES:
             raise ValueError(f"schedule must be one of {WEIGHT_SCHEDULES}, got {schedule!r}")
+        if prefix not in PREFIX_MODES:
+            raise ValueError(f"prefix must be one of {PREFIX_MODES}, got {prefix!r}")
+        if isinstance(max_guidance, bool) or not (isinstance(max_guidance, (int, float, np.floating))
+                                                  and math.isfinite(max_guidance) and max_guidance >= 0):
+            raise ValueError(f"max_guidance (beta) must be a finite number >= 0, got {max_guidance!r}")
         self.predict_inpainted = predict_inpainted
         self.schedule = schedule
+        self.max_guidance = float(max_guidance)
+        self.prefix = prefix
         self.guide_without_delay = bool(guide_without_delay)
 
     def _compute(self) -> Any:
@@ -165,9 +221,10 @@ class RealTimeChunking(AsyncChunking):
             return super()._compute()
         overlap = max(0, cur.request + cur.length - r)  # steps r .. r + overlap - 1 the current chunk covers
         n = max(d, overlap)
-        target = np.stack([_to_numpy(cur.action_at(r + j)) for j in range(n)], axis=1)  # (B, n, Da)
+        target = np.stack([to_numpy(cur.action_at(r + j)) for j in range(n)], axis=1)  # (B, n, Da)
         weights = rtc_weights(n, d, overlap, self.schedule)  # (n,)
-        chunk = self.predict_inpainted(stack_history(self.history), target, weights, frozen=d)
+        chunk = self.predict_inpainted(stack_history(self.history), target, weights, frozen=d,
+                                       max_guidance=self.max_guidance, prefix=self.prefix)
         shape = tuple(getattr(chunk, "shape", ()))
         if len(shape) != 3 or shape[0] != target.shape[0] or shape[1] < self.start + d:
             raise ValueError(f"predict_inpainted returned shape {shape}; expected (B={target.shape[0]}, "
@@ -180,3 +237,8 @@ class RealTimeChunking(AsyncChunking):
             chunk = np.array(chunk, copy=True)
             chunk[:, self.start:self.start + d] = committed
         return chunk
+
+
+STRATEGIES = {"sync": Synchronous, "async": AsyncChunking, "ensemble": DelayedEnsemble, "rtc": RealTimeChunking}
+"""Chapter 11's ways of executing chunks under a delay, by name: executor classes built like every
+executor, ``cls.from_spec(predict_chunk, spec, delay=d)`` (RTC also takes ``predict_inpainted``)."""

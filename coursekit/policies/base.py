@@ -122,19 +122,21 @@ class ChunkPolicy(nn.Module):
         c = self.config
         return ExecutionSpec(n_obs_steps=c.n_obs_steps, horizon=c.horizon, n_action_steps=c.n_action_steps)
 
-    def make_executor(self, predict_chunk: Callable[..., Any] | None = None, executor_cls: Any = None) -> Any:
+    def make_executor(self, predict_chunk: Callable[..., Any] | None = None, executor_cls: Any = None,
+                      **options: Any) -> Any:
         """An executor around ``predict_chunk`` (default: ``self.predict_chunk``).
 
         ``executor_cls`` replaces the default class (e.g. a student's RecedingHorizon or
-        TemporalEnsemble); every executor class is built the same way:
-        ``executor_cls.from_spec(predict_chunk, self.execution_spec())``.
+        TemporalEnsemble, or a delayed executor of chapter 11); every executor class is built the
+        same way: ``executor_cls.from_spec(predict_chunk, self.execution_spec(), **options)``
+        (``options``: e.g. a delayed executor's ``delay``).
         """
         from coursekit.execution.ensembling import TemporalEnsemble
         from coursekit.execution.receding import RecedingHorizon
 
         spec = self.execution_spec()
         cls = executor_cls or (TemporalEnsemble if spec.temporal_ensembling else RecedingHorizon)
-        return cls.from_spec(predict_chunk or self.predict_chunk, spec)
+        return cls.from_spec(predict_chunk or self.predict_chunk, spec, **options)
 
     def check_sampling(self, sampling: Mapping[str, Any]) -> None:
         """Refuse sampling options this policy does not have (ValueError naming them)."""

@@ -24,6 +24,10 @@ pure noise really is the network's training input (Lin et al. 2024). On a 20-min
 protocol seeds from 100000 — differences of this size are evaluation noise (score stderr ~0.05
 at 50 episodes), so the paper's choice stays the default. (Measured with ``coursekit eval CKPT
 --ddim-spacing {leading,trailing} [--episodes 100 --seed-start 200000]``.)
+
+Real-time chunking (chapter 11) steers the same sampler step by step: :class:`DenoisingHead`
+(``guided_head``) runs the policy's own sampler step on a guided epsilon, the PiGDM guidance of
+:mod:`coursekit.execution.rtc`.
 """
 
 from __future__ import annotations
@@ -34,11 +38,12 @@ from typing import Any
 
 import torch
 
-from coursekit.diffusion.loss import diffusion_loss, epsilon_loss
-from coursekit.diffusion.samplers import TIMESTEP_SPACINGS, DDIMSampler, DDPMSampler
+from coursekit.diffusion.loss import diffusion_loss, epsilon_loss, q_sample
+from coursekit.diffusion.samplers import TIMESTEP_SPACINGS, DDIMSampler, DDPMSampler, EpsModel, predict_x0
 from coursekit.diffusion.schedules import NoiseSchedule
+from coursekit.execution.rtc import epsilon_guidance_scale
 from coursekit.policies.base import Normalizer
-from coursekit.policies.unet_chunk import UNetChunkConfig, UNetChunkPolicy
+from coursekit.policies.unet_chunk import IterativeUNetPolicy, UNetChunkConfig
 
 SAMPLERS = ("ddim", "ddpm")
 DEFAULT_DDIM_STEPS = 10
@@ -82,7 +87,43 @@ class DiffusionPolicyConfig(UNetChunkConfig):
             raise ValueError(f"ddim_eta must be in [0, 1], got {self.ddim_eta!r}")
 
 
-class DiffusionPolicy(UNetChunkPolicy):
+class DenoisingHead:
+    """A diffusion sampler (DDIM or DDPM) one step at a time, guided on epsilon (real-time chunking).
+
+    ``clean``: the network's eps and x0_hat = ``predict_x0`` (unclipped: the clamp has no gradient);
+    ``step``: the sampler's own step on eps' = eps - ``epsilon_guidance_scale`` * g; ``noised``:
+    ``q_sample`` to the noise level the step's output x_prev is at (clean past the last step).
+    """
+
+    def __init__(self, eps_model: EpsModel, sampler: DDIMSampler | DDPMSampler, cond: torch.Tensor,
+                 generator: torch.Generator | None = None) -> None:
+        self.eps_model, self.sampler, self.cond, self.generator = eps_model, sampler, cond, generator
+        self.timesteps = [int(t) for t in sampler.timesteps.tolist()]
+        self.num_steps = len(self.timesteps)
+
+    def clean(self, x: torch.Tensor, k: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """Step k: x0_hat (B, Tp, Da) from the iterate x (B, Tp, Da), and the network's eps."""
+        t = self.timesteps[k]
+        eps = self.eps_model(x, torch.full((x.shape[0],), t, dtype=torch.long, device=x.device), self.cond)
+        return predict_x0(eps, x, self.sampler.schedule.alphas_cumprod[t]), eps
+
+    def step(self, x: torch.Tensor, k: int, eps: torch.Tensor, g: torch.Tensor | None, max_guidance: float) -> torch.Tensor:
+        """Step k: x_prev from x with the guided eps (g None: the plain sampler step)."""
+        t = self.timesteps[k]
+        if g is not None:
+            eps = eps - epsilon_guidance_scale(float(self.sampler.schedule.alphas_cumprod[t]), max_guidance) * g
+        return self.sampler.step(eps, t, x, generator=self.generator)
+
+    def noised(self, clean: torch.Tensor, noise: torch.Tensor, k: int) -> torch.Tensor:
+        """sqrt(abar_prev) clean + sqrt(1 - abar_prev) noise, (B, Tp, Da): the level x_prev of step k is at."""
+        prev = self.sampler.previous_timestep(self.timesteps[k])
+        if prev < 0:  # past the last step: abar = 1, the clean chunk itself
+            return clean
+        t = torch.full((clean.shape[0],), prev, dtype=torch.long, device=clean.device)  # (B,)
+        return q_sample(clean, t, noise, self.sampler.schedule.alphas_cumprod)
+
+
+class DiffusionPolicy(IterativeUNetPolicy):
     """Epsilon-prediction Diffusion Policy over action chunks (B, Tp, Da). See module docstring."""
 
     policy_type = "diffusion"
@@ -126,6 +167,11 @@ class DiffusionPolicy(UNetChunkPolicy):
             return DDPMSampler(self.schedule, num_inference_steps, clip_sample=c.clip_sample)
         raise ValueError(f"sampler must be one of {SAMPLERS}, got {kind!r}")
 
+    def guided_head(self, cond: torch.Tensor, generator: torch.Generator | None = None, sampler: str | None = None,
+                    num_inference_steps: int | None = None) -> DenoisingHead:
+        """The sampler ``predict_chunk`` would run (same options), one step at a time for RTC's guidance."""
+        return DenoisingHead(self.unet, self.make_sampler(sampler, num_inference_steps), cond, generator)
+
     def describe_sampling(self, **sampling: Any) -> dict[str, Any]:
         """Which sampler and how many steps ``predict_chunk(..., **sampling)`` runs (for evaluation reports)."""
         self.check_sampling(sampling)
@@ -146,7 +192,8 @@ class DiffusionPolicy(UNetChunkPolicy):
         sampler_obj = self.make_sampler(sampler, num_inference_steps)
 
         def draw(cond: torch.Tensor, shape: tuple[int, int, int]) -> Any:
-            return sampler_obj.sample(self.unet, shape, cond=cond, generator=generator, device=cond.device,
+            x_T = self.initial_noise(shape, generator, cond.device)  # (B, Tp, Da)
+            return sampler_obj.sample(self.unet, shape, cond=cond, generator=generator, device=cond.device, x_T=x_T,
                                       return_trajectory=return_trajectory)
 
         return self._sample_chunk(obs_history, draw, return_trajectory)

@@ -16,6 +16,10 @@ The U-Net's step embedding was built for integer diffusion steps 0..T-1; it gets
 sinusoidal embedding as DP's 100 steps. Departures, on purpose: the final chunk is clamped to
 [-1, 1], the range of the normalised data (DP clips its clean estimate at every step; pi0 does not
 clip); no clipping inside the integration, which would bend the ODE.
+
+Real-time chunking (chapter 11) steers the same integration step by step: :class:`EulerHead`
+(``guided_head``) runs the Euler step of :mod:`coursekit.flow.sampler` on a guided velocity, RTC's
+Algorithm 1 (:mod:`coursekit.execution.rtc`).
 """
 
 from __future__ import annotations
@@ -26,9 +30,10 @@ from typing import Any, Callable
 
 import torch
 
+from coursekit.execution.rtc import velocity_guidance_weight
 from coursekit.flow.loss import TIME_SAMPLINGS, flow_loss, flow_matching_loss
-from coursekit.flow.sampler import METHODS, integrate
-from coursekit.policies.unet_chunk import UNetChunkConfig, UNetChunkPolicy
+from coursekit.flow.sampler import METHODS, VelocityModel, euler_step, integrate, time_grid
+from coursekit.policies.unet_chunk import IterativeUNetPolicy, UNetChunkConfig
 
 
 @dataclass
@@ -57,7 +62,39 @@ class FlowMatchingPolicyConfig(UNetChunkConfig):
             raise ValueError(f"time_scale must be > 0, got {self.time_scale!r}")
 
 
-class FlowMatchingPolicy(UNetChunkPolicy):
+class EulerHead:
+    """Euler integration (t = 1 noise -> t = 0 data) one step at a time, guided on velocity (real-time chunking).
+
+    ``clean``: the network's v and x0_hat = x_t - t v; ``step``: ``euler_step`` with the guided
+    velocity v' = v - ``velocity_guidance_weight`` * g over the grid ``time_grid(steps)``;
+    ``noised``: the straight path's point t_next e + (1 - t_next) a0 after the step.
+    """
+
+    def __init__(self, velocity: VelocityModel, cond: torch.Tensor, steps: int) -> None:
+        self.velocity, self.cond = velocity, cond
+        self.grid = time_grid(steps)  # t_i = 1 - i / N, noise to data
+        self.num_steps = steps
+
+    def clean(self, x: torch.Tensor, k: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """Step k: x0_hat (B, Tp, Da) from the iterate x (B, Tp, Da), and the network's v."""
+        t = self.grid[k]
+        v = self.velocity(x, torch.full((x.shape[0],), t, dtype=x.dtype, device=x.device), self.cond)
+        return x - t * v, v
+
+    def step(self, x: torch.Tensor, k: int, v: torch.Tensor, g: torch.Tensor | None, max_guidance: float) -> torch.Tensor:
+        """Step k: x at t_{k+1} from x at t_k with the guided velocity (g None: the plain Euler step)."""
+        t, t_next = self.grid[k], self.grid[k + 1]
+        if g is not None:
+            v = v - velocity_guidance_weight(t, max_guidance) * g
+        return euler_step(lambda *_: v, x, t, t_next - t, self.cond)  # v is already evaluated at (x, t)
+
+    def noised(self, clean: torch.Tensor, noise: torch.Tensor, k: int) -> torch.Tensor:
+        """t_next noise + (1 - t_next) clean, (B, Tp, Da): the straight path's point after step k."""
+        t_next = self.grid[k + 1]
+        return t_next * noise + (1.0 - t_next) * clean
+
+
+class FlowMatchingPolicy(IterativeUNetPolicy):
     """Velocity-prediction chunk policy on the Diffusion Policy U-Net. See module docstring."""
 
     policy_type = "flow"
@@ -79,6 +116,18 @@ class FlowMatchingPolicy(UNetChunkPolicy):
         cond, action_n = self._batch_parts(batch)  # (B, cond_dim), (B, Tp, Da)
         loss = flow_loss(self.velocity, action_n, cond, self.config.time_sampling, generator=generator, loss_fn=loss_fn)
         return {"loss": loss}
+
+    def finish_sample(self, chunk_n: torch.Tensor) -> torch.Tensor:
+        """Clamp the integrated chunk (B, Tp, Da) to [-1, 1], the range of the normalised data."""
+        return chunk_n.clamp(-1.0, 1.0)
+
+    def guided_head(self, cond: torch.Tensor, generator: torch.Generator | None = None, sampler: str | None = None,
+                    num_inference_steps: int | None = None) -> EulerHead:
+        """The Euler integration ``predict_chunk`` would run, one step at a time for RTC's guidance."""
+        method = sampler or self.config.integration_method
+        if method != "euler":
+            raise ValueError(f"real-time chunking on a flow policy integrates with Euler, got sampler {method!r}")
+        return EulerHead(self.velocity, cond, int(num_inference_steps or self.config.num_inference_steps))
 
     def describe_sampling(self, **sampling: Any) -> dict[str, Any]:
         """Which integrator, how many steps and U-Net calls ``predict_chunk(..., **sampling)`` runs (for reports)."""
@@ -109,12 +158,11 @@ class FlowMatchingPolicy(UNetChunkPolicy):
             raise ValueError(f"sampler must be one of {METHODS} for a flow policy, got {method!r}")
 
         def draw(cond: torch.Tensor, shape: tuple[int, int, int]) -> Any:
-            gen_device = generator.device if generator is not None else cond.device
-            x1 = torch.randn(shape, generator=generator, device=gen_device).to(cond.device)  # (B, Tp, Da) at t = 1
+            x1 = self.initial_noise(shape, generator, cond.device)  # (B, Tp, Da) at t = 1
             out = integrate(self.velocity, x1, cond, steps=n, method=method, step_fn=step_fn,
                             return_trajectory=return_trajectory)
             chunk_n, traj_n = out if return_trajectory else (out, None)
-            chunk_n = chunk_n.clamp(-1.0, 1.0)  # (B, Tp, Da): the range of the normalised data
+            chunk_n = self.finish_sample(chunk_n)  # (B, Tp, Da)
             return (chunk_n, traj_n) if return_trajectory else chunk_n
 
         return self._sample_chunk(obs_history, draw, return_trajectory)

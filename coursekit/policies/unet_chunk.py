@@ -12,19 +12,23 @@ Observation conditioning (Chi et al. 2023, Sec. 3.2 "global conditioning" via Fi
                                   concat per step, flatten  -> (B, To*(F + Dp))
 
 Actions are min-max normalised to [-1, 1] too (required by the sampler's clip_sample).
+
+The generative heads (diffusion, flow) share more: :class:`IterativeUNetPolicy`, a chunk sampled
+from noise in steps, which real-time chunking can steer step by step (``predict_inpainted``).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import torch
 
 from coursekit.data.batches import WindowBatcher
 from coursekit.data.normalize import MinMaxNormalizer
+from coursekit.execution.rtc import MAX_GUIDANCE, PREFIX_MODES, GuidedHead, sample_guided
 from coursekit.execution.spec import check_horizons
 from coursekit.nn.unet1d import ConditionalUnet1D, UNet1DConfig
 from coursekit.nn.vision import VisionEncoder, VisionEncoderConfig
@@ -211,3 +215,87 @@ class UNetChunkPolicy(ChunkPolicy):
             chunk = chunk[0]  # (Tp, Da)
         first = next(iter(like.values())) if isinstance(like, Mapping) else like
         return chunk.detach().cpu().numpy() if isinstance(first, np.ndarray) else chunk
+
+
+class IterativeUNetPolicy(UNetChunkPolicy):
+    """A chunk sampled from noise in steps (diffusion: denoising; flow: integration) on this backbone.
+
+    Each subclass draws its starting noise with :meth:`initial_noise`, ends with
+    :meth:`finish_sample`, and shows its own sampler one step at a time through
+    :meth:`guided_head`; :meth:`predict_inpainted` runs that head under real-time chunking's
+    guidance (:mod:`coursekit.execution.rtc`). With all-zero weights it is ``predict_chunk``
+    exactly: the same noise from the same generator, the same steps.
+    """
+
+    guided_sampling_options: ClassVar[tuple[str, ...]] = ("sampler", "num_inference_steps")
+    """The sampling options ``predict_inpainted`` takes (a subset of ``sampling_options``)."""
+
+    def initial_noise(self, shape: tuple[int, ...], generator: torch.Generator | None, device: Any) -> torch.Tensor:
+        """The chunk at the noise end, N(0, I) of ``shape`` (B, Tp, Da), drawn on the generator's device."""
+        gen_device = generator.device if generator is not None else device
+        return torch.randn(shape, generator=generator, device=gen_device).to(device)
+
+    def finish_sample(self, chunk_n: torch.Tensor) -> torch.Tensor:
+        """The last touch on a sampled normalised chunk (B, Tp, Da): none unless a head says otherwise."""
+        return chunk_n
+
+    def guided_head(self, cond: torch.Tensor, generator: torch.Generator | None = None,
+                    **sampling: Any) -> GuidedHead:
+        """This policy's sampler for condition ``cond`` (B, cond_dim), seen one step at a time."""
+        raise NotImplementedError(f"{type(self).__name__} does not show its sampler step by step")
+
+    def predict_inpainted(self, obs_history: Any, target: Any, weights: Any, *, frozen: int = 0,
+                          generator: torch.Generator | None = None, max_guidance: float = MAX_GUIDANCE,
+                          offset: int | None = None, prefix: str = "guide", **sampling: Any) -> Any:
+        """A chunk (B, Tp, Da) whose steps ``offset + j`` are guided toward ``target[:, j]`` (RTC).
+
+        Args:
+            obs_history: raw history (B, To, ...) as for ``predict_chunk``.
+            target: Y, raw actions (B, n, Da) for chunk indices offset .. offset + n - 1.
+            weights: W (n,), >= 0 (:func:`coursekit.execution.rtc.rtc_weights`).
+            frozen: the first ``frozen`` target actions are copied verbatim into the result.
+            generator: draws the starting noise (and DDPM's step noise), as ``predict_chunk`` does.
+            max_guidance: beta, the clip of the guidance weight (RTC: 5).
+            offset: chunk index of target[:, 0] (default To - 1: the action for "now").
+            prefix: "guide" or "replace" (:data:`coursekit.execution.rtc.PREFIX_MODES`).
+            sampling: the options in ``guided_sampling_options``.
+        Returns raw actions, numpy if the history was numpy.
+        """
+        if prefix not in PREFIX_MODES:
+            raise ValueError(f"prefix must be one of {PREFIX_MODES}, got {prefix!r}")
+        unknown = sorted(set(sampling) - set(self.guided_sampling_options))
+        if unknown:
+            raise ValueError(f"predict_inpainted takes the sampling options {' and '.join(self.guided_sampling_options)}, "
+                             f"got {unknown}")
+        c = self.config
+        offset = c.n_obs_steps - 1 if offset is None else int(offset)
+        w = np.asarray(weights, dtype=np.float64)
+        y = np.asarray(target.detach().cpu() if hasattr(target, "detach") else target, dtype=np.float64)
+        if y.ndim != 3 or w.shape != (y.shape[1],) or offset + y.shape[1] > c.horizon or y.shape[2] != c.action_dim:
+            raise ValueError(f"target must be (B, n, Da={c.action_dim}) with weights (n,) and offset + n <= Tp={c.horizon}; "
+                             f"got target {y.shape}, weights {w.shape}, offset {offset}")
+        if not (np.all(np.isfinite(w)) and np.all(w >= 0)) or not 0 <= frozen <= y.shape[1]:
+            raise ValueError(f"weights must be finite and >= 0 and 0 <= frozen <= n={y.shape[1]}; got {w}, frozen={frozen}")
+
+        def draw(cond: torch.Tensor, shape: tuple[int, int, int]) -> torch.Tensor:
+            cond, dev = cond.detach(), cond.device  # guidance differentiates the iterate, not the observation
+            if y.shape[0] != shape[0]:
+                raise ValueError(f"target has batch {y.shape[0]}, the observations {shape[0]}")
+            full_y = torch.zeros(shape, device=dev)  # (B, Tp, Da), normalised
+            full_y[:, offset:offset + y.shape[1]] = self.normalizers["action"].normalize(
+                torch.as_tensor(y, dtype=torch.float32, device=dev))
+            full_w = torch.zeros(c.horizon, device=dev)  # (Tp,)
+            full_w[offset:offset + len(w)] = torch.as_tensor(w, dtype=torch.float32, device=dev)
+            x = self.initial_noise(shape, generator, dev)  # (B, Tp, Da), as predict_chunk draws it
+            head = self.guided_head(cond, generator, **sampling)
+            replace = None
+            if prefix == "replace" and frozen:
+                replace = torch.zeros(c.horizon, dtype=torch.bool, device=dev)
+                replace[offset:offset + frozen] = True
+            return self.finish_sample(sample_guided(head, x, full_y, full_w, max_guidance, replace=replace))
+
+        chunk = self._sample_chunk(obs_history, draw)
+        if frozen:  # the committed actions, exactly (chunk (B, Tp, Da), or (Tp, Da) for an unbatched history)
+            src = y[:, :frozen] if chunk.ndim == 3 else y[0, :frozen]  # (B, frozen, Da) or (frozen, Da)
+            chunk[..., offset:offset + frozen, :] = src if isinstance(chunk, np.ndarray) else chunk.new_tensor(src)
+        return chunk
