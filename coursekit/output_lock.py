@@ -215,8 +215,7 @@ class OutputLock:
                     raise
                 holder = _holder(fd)
                 os.close(fd)
-                raise ValueError(f"{shown} is being written by another coursekit process ({holder}); wait for it to "
-                                 f"finish, or choose another path") from None
+                raise ValueError(busy(shown, holder)) from None
             now = _lstat(lock_file)
             if now is None or (now.st_ino, now.st_dev) != (os.fstat(fd).st_ino, os.fstat(fd).st_dev):
                 os.close(fd)  # the holder removed this file after we opened it: lock the one there now
@@ -258,6 +257,30 @@ class OutputLock:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def busy(shown: str, holder: str) -> str:
+    """The one line that refuses a second writer of an output."""
+    return f"{shown} is being written by another coursekit process ({holder}); wait for it to finish, or choose another path"
+
+
+def holder_of(output: str | os.PathLike) -> str | None:
+    """"PID n: command" of a live process holding ``output``'s lock, else None. Writes nothing, waits for nothing."""
+    lock_file = lock_file_of(output)
+    st = _lstat(lock_file)
+    if fcntl is None or st is None or not stat.S_ISREG(st.st_mode):
+        return None
+    try:
+        fd = os.open(lock_file, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)  # granted at once unless a writer holds it exclusively
+    except OSError:
+        return _holder(fd)
+    finally:
+        os.close(fd)  # also drops the shared lock, if it was granted
+    return None
 
 
 def _holder(fd: int) -> str:

@@ -47,7 +47,7 @@ import sys
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
-from coursekit.output_lock import OutputLock, lock_output
+from coursekit.output_lock import OutputLock, busy, holder_of, lock_output
 
 _RENAME_EXCHANGE = 2
 _AT_FDCWD = -100
@@ -189,8 +189,15 @@ def claim_output(path: str | os.PathLike, *, what: str, foreign: Foreign | None,
     """
     inputs = list(inputs)
     args = dict(what=what, foreign=foreign, directory=directory, overwrite=overwrite, inputs=inputs, flag=flag)
-    path = check_output(path, **args)
-    with lock_output(path, shown=f"{flag} {str(path)!r}") as lock:
+    shown = f"{flag} {str(path)!r}"
+    try:
+        path = check_output(path, **args)
+    except ValueError:
+        holder = holder_of(path)  # a refusal of what a live writer is writing right now: name that writer
+        if holder is not None:
+            raise ValueError(busy(shown, holder)) from None
+        raise
+    with lock_output(path, shown=shown) as lock:
         check_output(path, **args)  # something may have appeared between the first check and the lock
         yield lock
 

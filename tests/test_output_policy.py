@@ -239,7 +239,7 @@ def test_a_second_train_on_the_same_out_refuses_at_once_naming_the_first(area, o
     if overwrite:
         assert subprocess.run(_train(area, out, "--steps", "2"), env=ENV, timeout=240).returncode == 0
     extra = ["--overwrite"] if overwrite else []
-    first = subprocess.Popen(_train(area, out, "--steps", "100000", "--minutes", "0.4", *extra), env=ENV,
+    first = subprocess.Popen(_train(area, out, "--steps", "100000", "--minutes", "0.3", *extra), env=ENV,
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         first.stdout.readline()  # its first line comes after the data is loaded: it holds the lock by then
