@@ -88,22 +88,6 @@ def _read_record(fd: int) -> tuple[bytes, dict | None]:
     return raw, record if isinstance(record, dict) and record.get("format") == FORMAT else None
 
 
-def read_record(output: str | os.PathLike) -> dict | None:
-    """The record in ``output``'s lock file (read only, never locked or waited on), or None."""
-    lock_file = lock_file_of(output)
-    st = _lstat(lock_file)
-    if st is None or not stat.S_ISREG(st.st_mode):
-        return None
-    try:
-        fd = os.open(lock_file, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC)
-    except OSError:
-        return None
-    try:
-        return _read_record(fd)[1]
-    finally:
-        os.close(fd)
-
-
 class OutputLock:
     """An exclusive claim on one output path, held by this process until :meth:`close`.
 

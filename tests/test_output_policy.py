@@ -174,6 +174,29 @@ def test_a_fifo_never_blocks(area, command):
     assert snapshot(area) == before
 
 
+@pytest.mark.parametrize("command", [["train", "--data", "{A}/missing.npz", "--steps", "2", "--out", "{A}/ro/run"],
+                                     ["collect", "pusht", "--out", "{A}/ro/d.npz"],
+                                     ["eval", "{A}/ckpt", "--json", "{A}/ro/eval.json"],
+                                     ["grade", "{A}/subs", "--out", "{A}/ro/graded"]],
+                         ids=["train", "collect", "eval", "grade"])
+def test_an_unwritable_folder_is_refused_before_any_work(area, command):
+    ro = area / "ro"
+    ro.mkdir()
+    cmd = _cli(*[a.replace("{A}", str(area)) for a in command])
+    if os.geteuid() == 0:  # access() lets root write anywhere a mount allows: make it a read-only mount
+        if shutil.which("bwrap") is None:
+            pytest.skip("as root this needs bubblewrap, to mount the folder read-only")
+        cmd = ["bwrap", "--dev-bind", "/", "/", "--ro-bind", str(ro), str(ro), *cmd]
+    else:
+        ro.chmod(0o555)
+    before = snapshot(area)
+    proc = subprocess.run(cmd, env=ENV, capture_output=True, text=True, timeout=120)
+    ro.chmod(0o755)
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
+    assert f": the folder '{ro}' is not writable" in proc.stderr  # train: before its (missing) data is read
+    assert snapshot(area) == before
+
+
 # -- 2. the user's hidden look-alikes of coursekit's temporaries survive real writes ------------------
 def test_a_users_backup_beside_the_output_survives_train_and_collect(area):
     runs, lo = area / "runs", area / "lo"

@@ -189,7 +189,7 @@ def run_dir_foreign(path: Path) -> str | None:
     return f"it has no checkpoint, and no {METRICS_NAME!r} with the trainer's header"
 
 
-def claim_run_out(args: argparse.Namespace):
+def claim_run_out(args: argparse.Namespace) -> contextlib.AbstractContextManager:
     """Check --out (new, empty, or with --overwrite an earlier run; never the data or inside it) and lock it."""
     from coursekit.outputs import claim_output
 
