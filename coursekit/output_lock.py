@@ -251,12 +251,12 @@ def busy(shown: str, holder: str) -> str:
 def holder_of(output: str | os.PathLike) -> str | None:
     """"PID n: command" of a live process holding ``output``'s lock, else None. Writes nothing, waits for nothing."""
     lock_file = lock_file_of(output)
-    st = _lstat(lock_file)
-    if fcntl is None or st is None or not stat.S_ISREG(st.st_mode):
-        return None
     try:
+        st = os.lstat(lock_file)
+        if fcntl is None or not stat.S_ISREG(st.st_mode):
+            return None
         fd = os.open(lock_file, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC)
-    except OSError:
+    except OSError:  # no lock file, or no way to it (a link loop...): nobody is writing there
         return None
     try:
         fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)  # granted at once unless a writer holds it exclusively

@@ -198,6 +198,7 @@ def test_an_unwritable_folder_is_refused_before_any_work(area, command):
 
 
 # -- 2. the user's hidden look-alikes of coursekit's temporaries survive real writes ------------------
+@pytest.mark.slow
 def test_a_users_backup_beside_the_output_survives_train_and_collect(area):
     runs, lo = area / "runs", area / "lo"
     for folder, name in ((runs, ".r.backup_1.old"), (lo, ".demos.npz.20241201.old")):
