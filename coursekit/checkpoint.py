@@ -20,7 +20,9 @@ sha256 is reproducible.
 
 Writing is atomic at the directory level: both files go into a hidden staging directory beside
 CKPT, which is then exchanged with CKPT in one step (``coursekit.outputs.replace_dir``), so a
-reader, or a process killed at any moment, sees the old checkpoint or the new one. Other files in
+reader, or a process killed at any moment, sees the old checkpoint or the new one. The write
+holds CKPT's lock (the caller's, e.g. ``coursekit train``'s on its run folder, or its own), which
+records the staging directory, so a killed write's leftovers are removed by the next one. Other files in
 CKPT (a training run's metrics.csv and loss.png) are carried over, never deleted.
 Loading rebuilds the policy from its registered class and config (``coursekit.policies``), checks
 the weights' SHA-256 against config.json, then every tensor name and shape against the freshly
@@ -31,6 +33,7 @@ what is wrong. ``torch.load`` is never used.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -38,7 +41,8 @@ import shutil
 from pathlib import Path
 from typing import Any
 
-from coursekit.outputs import clean_leftovers, replace_dir, staging_dir
+from coursekit.output_lock import OutputLock, lock_output
+from coursekit.outputs import replace_dir, staging_dir
 
 FORMAT = "coursekit-checkpoint"
 FORMAT_VERSION = 1
@@ -85,18 +89,16 @@ def _write_safetensors(tensors: dict[str, Any], path: Path, metadata: dict[str, 
 
 
 def save_checkpoint(policy: Any, path: str | os.PathLike, *, dataset_meta: dict[str, Any] | None = None,
-                    training: dict[str, Any] | None = None, half: bool = False) -> Path:
+                    training: dict[str, Any] | None = None, half: bool = False,
+                    lock: OutputLock | None = None) -> Path:
     """Write ``policy`` (a ChunkPolicy) to the directory ``path`` atomically; returns the path.
 
     ``dataset_meta`` (e.g. ``EpisodeDataset.meta``) and ``training`` (the trainer's summary) are
     stored verbatim in config.json; they must be JSON-serialisable. ``half=True`` stores float
     tensors as float16 (half the size, for checkpoints shipped in the repository); loading casts
-    them back to the policy's float32 parameters.
+    them back to the policy's float32 parameters. ``lock``: the caller's lock on ``path`` (or on
+    the run folder ``path`` is staged for); default: ``path`` is locked for the write.
     """
-    import coursekit
-    from coursekit.config import config_to_dict
-    from coursekit.policies.base import normalizers_to_json
-
     if not getattr(policy, "policy_type", ""):
         raise ValueError(f"save_checkpoint needs a policy with a policy_type, got {type(policy).__name__}")
     path = Path(path)
@@ -104,9 +106,22 @@ def save_checkpoint(policy: Any, path: str | os.PathLike, *, dataset_meta: dict[
     tensors = {k: v.detach().to("cpu").contiguous().clone() for k, v in policy.state_dict().items()}
     if half:
         tensors = {k: v.half() if v.is_floating_point() else v for k, v in tensors.items()}
-    check_replaceable(path)
-    clean_leftovers(path)  # temporaries of a killed earlier write to this place
-    with staging_dir(path) as tmp:
+    with contextlib.ExitStack() as stack:
+        if lock is None:
+            lock = stack.enter_context(lock_output(path))  # also removes what a killed earlier write left
+        check_replaceable(path)
+        _write_staged(policy, path, tensors, lock, dataset_meta=dataset_meta, training=training, half=half)
+    return path
+
+
+def _write_staged(policy: Any, path: Path, tensors: dict[str, Any], lock: OutputLock, *,
+                  dataset_meta: dict[str, Any] | None, training: dict[str, Any] | None, half: bool) -> None:
+    """Both files into a recorded staging directory beside ``path``, then one exchange with ``path``."""
+    import coursekit
+    from coursekit.config import config_to_dict
+    from coursekit.policies.base import normalizers_to_json
+
+    with staging_dir(path, lock) as tmp:
         weights = tmp / WEIGHTS_FILE
         _write_safetensors(tensors, weights, {"format": FORMAT, "policy_type": policy.policy_type})
         info = {
@@ -129,11 +144,10 @@ def save_checkpoint(policy: Any, path: str | os.PathLike, *, dataset_meta: dict[
         for f in (weights, tmp / CONFIG_FILE):
             with open(f, "rb") as fh:
                 os.fsync(fh.fileno())
-            os.chmod(f, 0o666 & ~umask)  # ordinary file modes, not mkdtemp's private 0600/0700
+            os.chmod(f, 0o666 & ~umask)  # ordinary file modes whatever wrote them
         os.chmod(tmp, 0o777 & ~umask)
         _keep_foreign_files(path, tmp)  # a run's metrics.csv, loss.png, ... are carried over, never deleted
-        replace_dir(tmp, path)  # atomic: path is the old checkpoint or the new one, never neither
-    return path
+        replace_dir(tmp, path, lock)  # atomic: path is the old checkpoint or the new one, never neither
 
 
 def is_checkpoint_dir(path: str | os.PathLike) -> bool:
@@ -313,11 +327,13 @@ class CheckpointSaver:
     ``dataset_meta`` is stored beside the trainer's summary (``training`` in config.json).
     """
 
-    def __init__(self, path: str | os.PathLike, dataset_meta: dict[str, Any] | None = None) -> None:
-        self.path, self.dataset_meta = Path(path), dataset_meta
+    def __init__(self, path: str | os.PathLike, dataset_meta: dict[str, Any] | None = None,
+                 lock: OutputLock | None = None) -> None:
+        self.path, self.dataset_meta, self.lock = Path(path), dataset_meta, lock
+        """``lock``: the run's lock (its temporaries are recorded there), or None to lock each write."""
 
     def on_checkpoint(self, policy: Any, summary: dict[str, Any]) -> None:
-        save_checkpoint(policy, self.path, dataset_meta=self.dataset_meta, training=dict(summary))
+        save_checkpoint(policy, self.path, dataset_meta=self.dataset_meta, training=dict(summary), lock=self.lock)
 
 
 def warm_start(policy: Any, path: str | os.PathLike) -> dict[str, Any]:

@@ -31,7 +31,8 @@ def test_build_is_deterministic_and_writes_only_differences(tmp_path):
 
 def test_cli_check_mode_reports_a_stale_file(tmp_path, capsys):
     build_exercises(tmp_path)
-    (tmp_path / "exercises" / f"{EXERCISES[0].id}.py").write_text("# edited by hand\n")
+    edited = tmp_path / "exercises" / f"{EXERCISES[0].id}.py"
+    edited.write_text(edited.read_text() + "# edited by hand\n")  # keeps its header: the build may restore it
     assert main(["exercises", "build", "--check", "--root", str(tmp_path)]) == 1
     assert "differs from a fresh build" in capsys.readouterr().out
     assert main(["exercises", "build", "--root", str(tmp_path)]) == 0

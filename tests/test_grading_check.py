@@ -54,8 +54,12 @@ def test_grade_cli_rejects_bad_input(tmp_path, capsys):
     assert "argument --jobs: must be an integer >= 1, got '0'" in capsys.readouterr().err
     assert main(["grade", str(tmp_path), "--out", str(tmp_path / "out"), "--timeout", "-1"]) == 2
     assert "argument --timeout: must be a finite number > 0, got '-1'" in capsys.readouterr().err
-    assert main(["grade", str(tmp_path), "--out", str(tmp_path / "out"), "--exercise", "nope"]) == 2
+    (tmp_path / "subs").mkdir()  # --out must be outside the submissions folder (coursekit.outputs)
+    assert main(["grade", str(tmp_path / "subs"), "--out", str(tmp_path / "out"), "--exercise", "nope"]) == 2
     assert "unknown exercise 'nope'" in capsys.readouterr().err
+    assert main(["grade", str(tmp_path), "--out", str(tmp_path / "out")]) == 2
+    assert "is inside the input" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["subs"], "the refused runs left something behind"
 
 
 def test_zip_members_are_flattened_and_size_capped(tmp_path):

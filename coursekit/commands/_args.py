@@ -11,6 +11,7 @@ import argparse
 import math
 import re
 from collections.abc import Callable
+from pathlib import Path
 
 MAX_SEED = 2**32 - 1
 """The environments' largest reset seed (numpy's legacy RandomState)."""
@@ -80,3 +81,13 @@ def positive_int_list(text: str) -> tuple[int, ...]:
     if not values or any(v < 1 for v in values):
         raise argparse.ArgumentTypeError(f"must be comma-separated positive integers like 32,64,128, got {text!r}")
     return values
+
+
+def output_path(text: str) -> Path:
+    """An argparse type: a path to write to; '' (which would mean the current folder) is refused.
+
+    Everything else about the path is checked by ``coursekit.outputs.check_output`` before any work.
+    """
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"must name a file or folder to write, got {text!r}")
+    return Path(text)

@@ -8,7 +8,7 @@ import sys
 import time
 from pathlib import Path
 
-from coursekit.commands._args import MAX_SEED, positive_int, seed_int
+from coursekit.commands._args import MAX_SEED, output_path, positive_int, seed_int
 
 HELP = "generate scripted demonstrations (pusht, aloha-cube, aloha-insertion) into a dataset file"
 
@@ -25,7 +25,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("task", choices=sorted(TASKS), help="which task's scripted expert to run")
     parser.add_argument("--episodes", type=positive_int, default=None, help="number of demonstrations (default: 200 PushT, 50 ALOHA)")
     parser.add_argument("--seed", type=seed_int, default=0, help="seed of the first episode; episode i uses seed + i")
-    parser.add_argument("--out", type=Path, default=None, help="output .npz (default: outputs/data/<task>_<episodes>ep_seed<seed>[_noise<levels>][_person].npz)")
+    parser.add_argument("--out", type=output_path, default=None, help="output .npz (default: outputs/data/<task>_<episodes>ep_seed<seed>[_noise<levels>][_person].npz)")
     parser.add_argument("--action-noise", default=None,
                         help="pusht only: DART execution noise in px (the env runs the expert's target plus Gaussian "
                              "noise, the file keeps the clean target); a comma list is cycled over episodes, "
@@ -40,8 +40,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from coursekit.data.episodes import is_dataset_file
-    from coursekit.outputs import check_output, clean_leftovers
+    from coursekit.outputs import claim_output
 
     episodes = args.episodes if args.episodes is not None else DEFAULT_EPISODES[args.task]
     if args.seed > MAX_SEED - (episodes - 1):
@@ -64,12 +63,20 @@ def run(args: argparse.Namespace) -> int:
         extra["style"] = STYLES[args.style]
         tag += "" if args.style == "scripted" else f"_{args.style}"
     out = args.out or Path("outputs/data") / f"{args.task}_{episodes}ep_seed{args.seed}{tag}.npz"
-    check_output(out, what="coursekit dataset", is_ours=is_dataset_file, directory=False, overwrite=args.overwrite)
-    for leftover in clean_leftovers(out):
-        print(f"removed {str(leftover)!r}, left by an interrupted earlier run", file=sys.stderr)
-    start = time.perf_counter()
-    dataset = collect(episodes, args.seed, progress=not args.no_progress, **extra)
-    dataset.save(out)
+    with claim_output(out, what="coursekit dataset", foreign=dataset_foreign, directory=False,
+                      overwrite=args.overwrite) as lock:
+        for leftover in lock.swept:
+            print(f"removed {str(leftover)!r}, left by an interrupted earlier run", file=sys.stderr)
+        start = time.perf_counter()
+        dataset = collect(episodes, args.seed, progress=not args.no_progress, **extra)
+        dataset.save(out, lock=lock)
     seconds = time.perf_counter() - start
     print(f"wrote {out}: {dataset.n_episodes} episodes, {dataset.n_steps} steps in {seconds:.1f} s")
     return 0
+
+
+def dataset_foreign(path: Path) -> str | None:
+    """None if the (regular) file ``path`` is a coursekit dataset, else why it is not one (for check_output)."""
+    from coursekit.data.episodes import is_dataset_file
+
+    return None if is_dataset_file(path) else "it lacks the members every coursekit dataset has"

@@ -12,11 +12,12 @@ sampling options. ``--record DIR`` writes a self-contained meshcat HTML replay o
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 from pathlib import Path
 from typing import Any
 
-from coursekit.commands._args import MAX_SEED, device, nonnegative_float, positive_int, seed_int
+from coursekit.commands._args import MAX_SEED, device, nonnegative_float, output_path, positive_int, seed_int
 
 HELP = "evaluate a policy checkpoint on held-out seeds (PushT score/success, ALOHA stages/strict success)"
 
@@ -39,10 +40,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=seed_int, default=0, help="seed of the sampler noise (default 0)")
     parser.add_argument("--device", type=device, default="auto", help="auto, cpu, cuda, mps (default auto)")
     parser.add_argument("--threads", type=positive_int, default=None, help="torch CPU threads (default: torch's choice)")
-    parser.add_argument("--json", type=Path, default=None,
-                        help="also write the summary to this JSON file (an earlier summary there is replaced; "
-                             "any other file is refused)")
-    parser.add_argument("--record", type=Path, default=None,
+    parser.add_argument("--json", type=output_path, default=None,
+                        help="also write the summary to this JSON file (an earlier `coursekit eval` summary there is "
+                             "replaced; any other file is refused)")
+    parser.add_argument("--record", type=output_path, default=None,
                         help="write a meshcat HTML replay and a PNG grid of first/last frames to this new folder")
     parser.add_argument("--record-episodes", type=positive_int, default=4, help="episodes to record with --record (default 4)")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
@@ -60,30 +61,51 @@ def _overrides(args: argparse.Namespace) -> dict[str, Any]:
     return changes
 
 
-def is_eval_summary(path: Path) -> bool:
-    """A JSON file `coursekit eval --json` wrote (an object naming the evaluated checkpoint)."""
+SUMMARY_FORMAT = "coursekit-eval-summary"
+"""The ``format`` entry of every summary `coursekit eval --json` writes: what proves a file there is one."""
+
+
+def eval_summary_foreign(path: Path) -> str | None:
+    """None if the (regular) file ``path`` is a summary `coursekit eval --json` wrote, else why not.
+
+    The proof is the summary's ``format`` entry; any other JSON, whatever its keys, is a user's.
+    """
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
+        with open(path, "rb") as fh:
+            raw = fh.read(1 << 20)
+        data = json.loads(raw.decode("utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError):
-        return False
-    return isinstance(data, dict) and "checkpoint" in data and "episodes" in data
+        return "it is not a JSON summary"
+    if not isinstance(data, dict) or data.get("format") != SUMMARY_FORMAT:
+        return f"it has no \"format\": \"{SUMMARY_FORMAT}\" entry"
+    return None
 
 
-def _check_outputs(args: argparse.Namespace) -> None:
-    """Before any evaluation: --json and --record are safe places, the seed range is valid."""
-    from coursekit.outputs import check_output
+def _claim_outputs(args: argparse.Namespace, stack: contextlib.ExitStack) -> dict[str, Any]:
+    """Before any evaluation: --json and --record are checked and locked, the seed range is valid."""
+    from coursekit.outputs import claim_output
 
     if args.seed_start is not None and args.seed_start + args.episodes - 1 > MAX_SEED:
         raise ValueError(f"--seed-start {args.seed_start} + --episodes {args.episodes} runs past the largest seed {MAX_SEED}")
+    locks = {}
     if args.json is not None:
-        check_output(args.json, what="coursekit evaluation summary", is_ours=is_eval_summary, directory=False,
-                     overwrite=True, inputs=[args.checkpoint], flag="--json")
+        locks["json"] = stack.enter_context(claim_output(
+            args.json, what="coursekit evaluation summary", foreign=eval_summary_foreign, directory=False,
+            overwrite=True, inputs=[args.checkpoint], flag="--json"))
     if args.record is not None:  # a new or empty folder: write_replay never replaces files
-        check_output(args.record, what="new folder", is_ours=lambda p: False, directory=True,
-                     inputs=[args.checkpoint] + ([args.json] if args.json is not None else []), flag="--record")
+        locks["record"] = stack.enter_context(claim_output(
+            args.record, what="new folder", foreign=None, directory=True,
+            inputs=[args.checkpoint] + ([args.json] if args.json is not None else []), flag="--record"))
+    return locks
 
 
 def run(args: argparse.Namespace) -> int:
+    with contextlib.ExitStack() as stack:
+        locks = _claim_outputs(args, stack)
+        return _evaluate(args, locks)
+
+
+def _evaluate(args: argparse.Namespace, locks: dict[str, Any]) -> int:
     import torch
 
     from coursekit.checkpoint import load_checkpoint, read_checkpoint_info
@@ -91,7 +113,6 @@ def run(args: argparse.Namespace) -> int:
     from coursekit.evaluate.result import EVAL_SEED_START, heldout_seeds
     from coursekit.evaluate.tasks import make_adapter, task_of
 
-    _check_outputs(args)
     if args.threads is not None:
         torch.set_num_threads(args.threads)
     info = read_checkpoint_info(args.checkpoint)
@@ -108,10 +129,10 @@ def run(args: argparse.Namespace) -> int:
     adapter = make_adapter(task_of(policy, info.get("dataset")), policy)
     result = evaluate(policy, adapter, seeds, max_steps=args.max_steps, sampling=sampling, seed=args.seed,
                       dataset_meta=info.get("dataset"), progress=not args.no_progress, record=args.record is not None)
-    summary = {"checkpoint": str(args.checkpoint), **result.summary()}
+    summary = {"format": SUMMARY_FORMAT, "checkpoint": str(args.checkpoint), **result.summary()}
     if args.record is not None:
-        summary["record"] = {k: str(v) for k, v in _write_replay(args, adapter, result).items()}
-    return _report(args, summary)
+        summary["record"] = {k: str(v) for k, v in _write_replay(args, adapter, result, locks["record"]).items()}
+    return _report(args, summary, locks.get("json"))
 
 
 # flag -> (where the policy lists what it accepts, the field it sets)
@@ -137,7 +158,7 @@ def _check_flags_apply(args: argparse.Namespace, policy: Any) -> None:
             raise ValueError(f"{given}: {exc}") from None
 
 
-def _write_replay(args: argparse.Namespace, adapter: Any, result: Any) -> dict[str, Any]:
+def _write_replay(args: argparse.Namespace, adapter: Any, result: Any, lock: Any) -> dict[str, Any]:
     """The first --record-episodes episodes as EpisodeRecordings -> coursekit.viz.replay.write_replay."""
     from coursekit.viz.replay import EpisodeRecording, write_replay
 
@@ -146,14 +167,14 @@ def _write_replay(args: argparse.Namespace, adapter: Any, result: Any) -> dict[s
     episodes = [EpisodeRecording(seed=result.seeds[i], states=states[i, : int(result.length[i]) + 1],
                                  score=float(scores[i]), success=bool(success[i]))
                 for i in range(min(args.record_episodes, len(result.seeds)))]
-    return write_replay(args.record, adapter.task, episodes)
+    return write_replay(args.record, adapter.task, episodes, lock=lock)
 
 
-def _report(args: argparse.Namespace, summary: dict) -> int:
+def _report(args: argparse.Namespace, summary: dict, lock: Any) -> int:
     from coursekit.atomic import atomic_write_text
 
     text = json.dumps(summary, indent=1)
     print(text)
     if args.json is not None:
-        atomic_write_text(args.json, text + "\n")
+        atomic_write_text(args.json, text + "\n", lock=lock)
     return 0

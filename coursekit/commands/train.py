@@ -28,8 +28,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from coursekit.commands._args import (device, nonnegative_int, positive_float, positive_int, positive_int_list,
-                                      seed_int)
+from coursekit.commands._args import (device, nonnegative_int, output_path, positive_float, positive_int,
+                                      positive_int_list, seed_int)
 
 from coursekit.data.features import FEATURES  # numpy only: `coursekit --help` stays instant
 from coursekit.policies import POLICY_TYPES  # the registry itself (no torch until a class is used)
@@ -41,7 +41,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--policy", choices=sorted(POLICY_TYPES), default="diffusion",
                         help="policy head (default: diffusion; act = ACT, the transformer CVAE; flow = flow matching, chapter 10)")
     parser.add_argument("--data", type=Path, required=True, help="demonstrations .npz (from `coursekit collect ...`)")
-    parser.add_argument("--out", type=Path, required=True,
+    parser.add_argument("--out", type=output_path, required=True,
                         help="run folder to create: checkpoint (model.safetensors + config.json), metrics.csv, loss.png")
     parser.add_argument("--overwrite", action="store_true",
                         help="replace an existing run at --out: the new run trains in a hidden folder beside it and "
@@ -100,20 +100,27 @@ def _config_fields(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def run(args: argparse.Namespace) -> int:
-    """One flow for every policy type and task: check the output, build, train with callbacks, report."""
+    """One flow for every policy type and task: claim the output, build, train with callbacks, report."""
+    if args.minutes is None and args.steps is None:
+        raise ValueError("give a budget: --minutes M and/or --steps N")
+    with claim_run_out(args) as lock:  # before any work: nothing is loaded, built or written yet
+        for leftover in lock.swept:
+            print(f"removed {str(leftover)!r}, left by an interrupted earlier run", file=sys.stderr)
+        return _train(args, lock)
+
+
+def _train(args: argparse.Namespace, lock: Any) -> int:
+    """Build the policy and its data, train into --out (or a staging folder that replaces it), report."""
     from coursekit.checkpoint import CheckpointSaver, warm_start
     from coursekit.data.episodes import EpisodeDataset
     from coursekit.data.features import default_features
     from coursekit.device import resolve_device
-    from coursekit.outputs import clean_leftovers, replace_dir, staging_dir
+    from coursekit.outputs import replace_dir, staging_dir
     from coursekit.policies import get_policy_class
     from coursekit.policies.factory import make_policy
     from coursekit.train import TrainConfig, train
     from coursekit.viz.run_log import MetricsLog
 
-    if args.minutes is None and args.steps is None:
-        raise ValueError("give a budget: --minutes M and/or --steps N")
-    check_run_out(args)  # before any work: nothing is loaded, built or written yet
     fields = _config_fields(args)
     _check_flags_apply(args, {f.name for f in dataclasses.fields(get_policy_class(args.policy).config_class)}, fields)
     resolve_device(args.device)  # an unavailable device is refused before the data is read
@@ -136,53 +143,58 @@ def run(args: argparse.Namespace) -> int:
     prior = warm_start(policy, args.init_from) if args.init_from is not None else None
     if prior is not None:
         print(f"warm start from {args.init_from} ({prior['steps']} steps, {prior['seconds']} s)")
-    for leftover in clean_leftovers(args.out):
-        print(f"removed {str(leftover)!r}, left by an interrupted earlier run", file=sys.stderr)
     with contextlib.ExitStack() as stack:
         run_dir = args.out
         if args.out.exists() and any(args.out.iterdir()):  # --overwrite: keep the old run until the new is complete
-            run_dir = stack.enter_context(staging_dir(args.out))
+            run_dir = stack.enter_context(staging_dir(args.out, lock))
             print(f"training in {run_dir}; it replaces {args.out} when complete")
-        with MetricsLog(run_dir) as metrics:  # metrics.csv + loss.png beside the checkpoint, during training
-            result = train(policy, batches, config, callbacks=[CheckpointSaver(run_dir, dataset_meta=meta), metrics],
-                           init_from=prior)
+        saver = CheckpointSaver(run_dir, dataset_meta=meta, lock=lock)
+        with MetricsLog(run_dir, lock=lock) as metrics:  # metrics.csv + loss.png beside the checkpoint, during training
+            result = train(policy, batches, config, callbacks=[saver, metrics], init_from=prior)
         if run_dir != args.out:
-            replace_dir(run_dir, args.out)  # one atomic exchange; the old run is then removed with the staging folder
+            replace_dir(run_dir, args.out, lock)  # one atomic exchange; the old run is then removed with the staging folder
     s = result.summary
     print(json.dumps({k: s[k] for k in ("steps", "seconds", "samples_per_s", "final_loss")}))
     print(f"wrote {args.out}")
     return 0
 
 
-def is_run_dir(path: Path) -> bool:
-    """A run folder `coursekit train` wrote (finished, or interrupted before its first checkpoint).
+def run_dir_foreign(path: Path) -> str | None:
+    """None if ``path`` is a run folder `coursekit train` wrote, else which of its files is not a run's.
 
-    Nothing in it but a run's files (checkpoint, metrics.csv, loss.png), and either a readable
-    checkpoint or a metrics.csv with the trainer's own header: a user's folder never qualifies.
+    A run folder holds nothing but a run's files (checkpoint, metrics.csv, loss.png), each a
+    regular file, and either a readable checkpoint or a metrics.csv with the trainer's own header:
+    a user's folder never qualifies.
     """
     from coursekit.checkpoint import CONFIG_FILE, WEIGHTS_FILE, is_checkpoint_dir
+    from coursekit.outputs import regular_file
     from coursekit.viz.run_log import COLUMNS, LOSS_PLOT_NAME, METRICS_NAME
 
-    names = {p.name for p in path.iterdir()}
-    if not names or not names <= {CONFIG_FILE, WEIGHTS_FILE, METRICS_NAME, LOSS_PLOT_NAME}:
-        return False
+    names = sorted(p.name for p in path.iterdir())
+    for name in names:
+        if name not in (CONFIG_FILE, WEIGHTS_FILE, METRICS_NAME, LOSS_PLOT_NAME):
+            return f"it holds {name!r}, which a run never writes"
+        if not regular_file(path / name):
+            return f"its {name!r} is not a regular file"
     if is_checkpoint_dir(path):
-        return True
-    if names & {CONFIG_FILE, WEIGHTS_FILE}:
-        return False  # a checkpoint's file names without a readable checkpoint: not ours to replace
+        return None
+    if CONFIG_FILE in names or WEIGHTS_FILE in names:
+        return f"its {CONFIG_FILE if CONFIG_FILE in names else WEIGHTS_FILE!r} is not a coursekit checkpoint's"
     try:
         with open(path / METRICS_NAME, encoding="utf-8") as fh:
-            return fh.readline().strip() == ",".join(COLUMNS)
+            if fh.readline().strip() == ",".join(COLUMNS):
+                return None
     except (OSError, UnicodeDecodeError):
-        return False
+        pass
+    return f"it has no checkpoint, and no {METRICS_NAME!r} with the trainer's header"
 
 
-def check_run_out(args: argparse.Namespace) -> None:
-    """Before any work: --out is new, empty, or (with --overwrite) an earlier run; never the data or inside it."""
-    from coursekit.outputs import check_output
+def claim_run_out(args: argparse.Namespace) -> contextlib.AbstractContextManager:
+    """Check --out (new, empty, or with --overwrite an earlier run; never the data or inside it) and lock it."""
+    from coursekit.outputs import claim_output
 
-    check_output(args.out, what="coursekit run folder", is_ours=is_run_dir, directory=True, overwrite=args.overwrite,
-                 inputs=[args.data, args.init_from])
+    return claim_output(args.out, what="coursekit run folder", foreign=run_dir_foreign, directory=True,
+                        overwrite=args.overwrite, inputs=[args.data, args.init_from])
 
 
 def _check_flags_apply(args: argparse.Namespace, config_fields: set[str], fields: dict[str, Any]) -> None:

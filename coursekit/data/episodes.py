@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from coursekit.atomic import atomic_path
-from coursekit.outputs import clean_leftovers
+from coursekit.output_lock import OutputLock
 
 FORMAT_VERSION = 1
 _META_KEY = "__meta__"
@@ -113,18 +113,18 @@ class EpisodeDataset:
         return f"EpisodeDataset({self.n_episodes} episodes, {self.n_steps} steps: {shapes}; env={self.meta.get('env_id')})"
 
     # ---- disk ---------------------------------------------------------------------------
-    def save(self, path: str | os.PathLike) -> Path:
+    def save(self, path: str | os.PathLike, lock: OutputLock | None = None) -> Path:
         """Write atomically to ``path`` (``.npz``); an existing file is replaced only on success.
 
-        Hidden temporaries that killed earlier writes left beside ``path`` are removed first.
+        The write holds ``path``'s lock (``lock``, the caller's, or its own), which also removes
+        the temporaries a killed earlier write of ``path`` left (see :mod:`coursekit.output_lock`).
         """
         path = Path(path)
-        clean_leftovers(path)
         meta = {"format_version": FORMAT_VERSION, **self.meta}
         payload = {k: np.ascontiguousarray(v) for k, v in self.arrays.items()}
         payload[_ENDS_KEY] = self.episode_ends
         payload[_META_KEY] = np.array(json.dumps(meta, sort_keys=True))
-        with atomic_path(path) as tmp:
+        with atomic_path(path, lock=lock) as tmp:
             with open(tmp, "wb") as fh:  # a file handle: np.savez must not append ".npz"
                 np.savez_compressed(fh, **payload)
         return path

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import stat
 import sys
 import tempfile
@@ -28,7 +29,7 @@ from pathlib import Path
 from coursekit.grading.paths import repo_root
 from coursekit.grading.registry import EXERCISES, get_exercise
 from coursekit.grading.runner import Limits
-from coursekit.atomic import atomic_write_text
+from coursekit.atomic import atomic_path, atomic_write_text
 
 SETUP = """#!/usr/bin/env bash
 # Gradescope image build (Ubuntu, root): bubblewrap, Python >= 3.11 and the pinned environment.
@@ -74,12 +75,16 @@ def _package_files(package: Path):
 
 
 def write_autograder(zip_path: str | Path, exercises: list[str] | None = None, hidden_tests: str | Path | None = None,
-                     limits: Limits | None = None) -> Path:
-    """Write the autograder zip (refuses to overwrite an existing file); returns its path."""
+                     limits: Limits | None = None, lock=None) -> Path:
+    """Write the autograder zip (refuses to overwrite an existing file or link); returns its path.
+
+    The zip is built in a temporary with a random name recorded in ``zip_path``'s lock (``lock``,
+    the caller's :class:`coursekit.output_lock.OutputLock`, or one taken here), then renamed into place.
+    """
     from coursekit.grading.hidden import load_hidden_tests
 
     zip_path = Path(zip_path)
-    if zip_path.exists():
+    if os.path.lexists(zip_path):
         raise ValueError(f"{zip_path} already exists: choose a new name (nothing was written)")
     if not zip_path.parent.is_dir():
         raise FileNotFoundError(f"folder {str(zip_path.parent)!r} does not exist")
@@ -89,8 +94,8 @@ def write_autograder(zip_path: str | Path, exercises: list[str] | None = None, h
     root = repo_root()
     config = {"exercises": [e.id for e in chosen],
               "limits": {k: getattr(limits, k) for k in ("timeout_s", "test_timeout_s", "memory_mb", "output_mb", "disk_mb")}}
-    tmp = zip_path.with_name(f".{zip_path.name}.partial")
-    with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+    with atomic_path(zip_path, suffix=".zip", lock=lock) as tmp, \
+            zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as zf:
         def add_text(name: str, text: str, executable: bool = False) -> None:
             info = zipfile.ZipInfo(name, date_time=(2020, 1, 1, 0, 0, 0))
             info.external_attr = ((0o755 if executable else 0o644) | stat.S_IFREG) << 16
@@ -109,7 +114,6 @@ def write_autograder(zip_path: str | Path, exercises: list[str] | None = None, h
             add_text(e.test_module, (root / e.test_module).read_text())
         for name, data in hidden.items():
             add_text(f"hidden/{name}", data.decode())
-    tmp.replace(zip_path)
     return zip_path
 
 

@@ -38,6 +38,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
+    from coursekit.output_lock import OutputLock
     from coursekit.viz.meshcat_scene import MeshcatScene
 
 PUSHT = "pusht"
@@ -307,7 +308,7 @@ def _png_bytes(image: np.ndarray) -> bytes:
 # -- the one call ----------------------------------------------------------------------------------------
 def write_replay(out_dir: str | os.PathLike, task: str, episodes: Sequence[EpisodeRecording], *,
                  fps: float | None = None, overwrite: bool = False,
-                 scene: MeshcatScene | None = None) -> dict[str, Path]:
+                 scene: MeshcatScene | None = None, lock: OutputLock | None = None) -> dict[str, Path]:
     """Write ``replay.html`` and ``frames.png`` for ``episodes`` of ``task`` into ``out_dir``.
 
     Args:
@@ -318,6 +319,8 @@ def write_replay(out_dir: str | os.PathLike, task: str, episodes: Sequence[Episo
         fps: playback rate of the HTML (default: the task's control rate, :data:`CONTROL_HZ`).
         overwrite: replace existing ``replay.html`` / ``frames.png``.
         scene: a :class:`MeshcatScene` to draw in (cleared); default: a private one, closed after.
+        lock: the caller's lock on ``out_dir`` (``coursekit eval --record`` holds one), under which
+            both files are written; default: each file is locked while it is written.
 
     Returns:
         {"html": path of replay.html, "frames": path of frames.png}.
@@ -339,7 +342,7 @@ def write_replay(out_dir: str | os.PathLike, task: str, episodes: Sequence[Episo
     png = _png_bytes(frames_grid(task, episodes))
     out_dir.mkdir(parents=True, exist_ok=True)
     _check_out_dir(out_dir, overwrite)  # again: nothing appeared while we drew
-    atomic_write_text(html_path, page)
-    atomic_write_bytes(png_path, png)
+    atomic_write_text(html_path, page, lock=lock)
+    atomic_write_bytes(png_path, png, lock=lock)
     return {"html": html_path, "frames": png_path}
 

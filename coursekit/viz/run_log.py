@@ -22,8 +22,12 @@ import time
 from collections.abc import Mapping
 from pathlib import Path
 from types import TracebackType
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from coursekit.output_lock import OutputLock
 
 COLUMNS = ("step", "loss", "lr", "samples_per_s", "wall_s")
 """Columns of ``metrics.csv``: optimiser step, training loss, learning rate, throughput, seconds since start."""
@@ -90,13 +94,14 @@ def summary_title(metrics: Mapping[str, np.ndarray]) -> str:
     return f"{total} steps in {_duration(float(wall.max()) if len(wall) else math.nan)}, {mean_sps} samples/s on average"
 
 
-def plot_metrics(metrics_csv: str | Path, out_png: str | Path) -> Path:
+def plot_metrics(metrics_csv: str | Path, out_png: str | Path, lock: OutputLock | None = None) -> Path:
     """Draw a metrics CSV (see :data:`COLUMNS`) to ``out_png``; return its path.
 
     Top panel: the loss against the step (log y when every loss is positive, else linear), the
     raw rows faint and a trailing mean over ~2 % of the rows bold. Bottom panel: the learning
     rate. Title: total steps, wall time and mean samples/s. Non-finite values (a diverged loss)
-    are left out of the lines, and counted in the legend. Written atomically.
+    are left out of the lines, and counted in the legend. Written atomically (under ``lock``, the
+    caller's lock on the run folder, if given: see :func:`coursekit.atomic.atomic_path`).
 
     Raises ValueError when the CSV has no rows (nothing to draw), plus what :func:`read_metrics` raises.
     """
@@ -137,7 +142,7 @@ def plot_metrics(metrics_csv: str | Path, out_png: str | Path) -> Path:
     ax_lr.ticklabel_format(axis="y", style="sci", scilimits=(-2, 3))
     fig.suptitle(summary_title(m), fontsize=11)
     out = Path(out_png)
-    with atomic_path(out, suffix=".png") as tmp:
+    with atomic_path(out, suffix=".png", lock=lock) as tmp:
         fig.savefig(tmp, dpi=DPI, format="png")
     return out
 
@@ -153,11 +158,13 @@ class MetricsLog:
             or ``loss.png``: the log only writes files it created.
         plot_every_s: least number of seconds between two re-draws of ``loss.png`` during the
             run (the first record draws at once; :meth:`close` always draws the final one).
+        lock: the command's lock on the run folder (``coursekit.outputs.claim_output``), so the
+            plot's temporaries are recorded there; None locks each re-draw on its own.
 
     Raises FileExistsError naming the file when ``metrics.csv`` or ``loss.png`` exists.
     """
 
-    def __init__(self, run_dir: str | Path, *, plot_every_s: float = 30.0) -> None:
+    def __init__(self, run_dir: str | Path, *, plot_every_s: float = 30.0, lock: OutputLock | None = None) -> None:
         if not (isinstance(plot_every_s, (int, float)) and plot_every_s >= 0 and math.isfinite(plot_every_s)):
             raise ValueError(f"plot_every_s must be a finite number of seconds >= 0, got {plot_every_s!r}")
         self.run_dir = Path(run_dir)
@@ -166,6 +173,7 @@ class MetricsLog:
         self.csv_path = self.run_dir / METRICS_NAME
         self.png_path = self.run_dir / LOSS_PLOT_NAME
         self.plot_every_s = float(plot_every_s)
+        self.lock = lock
         self.rows = 0
         """Rows written so far."""
         if self.png_path.exists():
@@ -211,7 +219,7 @@ class MetricsLog:
         self.rows += 1
         now = time.monotonic()
         if now - self._last_plot >= self.plot_every_s:
-            plot_metrics(self.csv_path, self.png_path)
+            plot_metrics(self.csv_path, self.png_path, lock=self.lock)
             self._last_plot = time.monotonic()
 
     def close(self) -> None:
@@ -220,7 +228,7 @@ class MetricsLog:
             return
         self._fh.close()
         if self.rows:
-            plot_metrics(self.csv_path, self.png_path)
+            plot_metrics(self.csv_path, self.png_path, lock=self.lock)
 
     def __enter__(self) -> MetricsLog:
         return self
