@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from coursekit.commands._args import MAX_SEED, device, nonnegative_float, positive_int, seed_int
+from coursekit.tasks.registry import TASKS  # plain data: `coursekit --help` stays instant
 
 HELP = "evaluate a policy checkpoint on held-out seeds (PushT score/success, ALOHA stages/strict success)"
 
@@ -25,7 +26,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("checkpoint", type=Path, help="checkpoint directory (from `coursekit train`)")
     parser.add_argument("--episodes", type=positive_int, default=50, help="held-out episodes (default 50)")
     parser.add_argument("--seed-start", type=seed_int, default=None, help="first reset seed (default 100000; episode i uses start + i)")
-    parser.add_argument("--max-steps", type=positive_int, default=None, help="steps per episode (default 300 PushT, 400 ALOHA)")
+    protocol = ", ".join(f"{t.max_steps} {t.name}" for t in TASKS.values())
+    parser.add_argument("--max-steps", type=positive_int, default=None,
+                        help=f"steps per episode (default: the task's protocol, {protocol})")
     parser.add_argument("--sampler", choices=["ddim", "ddpm", "euler", "midpoint"], default=None,
                         help="sampler (default: the checkpoint's): ddim/ddpm for diffusion, euler/midpoint for flow")
     parser.add_argument("--steps", type=positive_int, default=None,

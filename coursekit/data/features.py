@@ -59,25 +59,17 @@ def pusht_state_features(state: np.ndarray) -> np.ndarray:
     return out.astype(np.float32)  # (..., 6)
 
 
-def _local_keypoints() -> np.ndarray:
-    """(K, 2) keypoints of the T in its own frame (pose (0, 0, 0)), from the env's geometry."""
-    from coursekit.envs.pusht_geometry import block_keypoints  # numpy/shapely only, no pymunk
-
-    return np.asarray(block_keypoints((0.0, 0.0, 0.0)), dtype=np.float64)  # (K, 2)
-
-
 def pusht_keypoint_features(state: np.ndarray) -> np.ndarray:
     """[ax, ay, bx, by, angle] (..., 5) -> [ax, ay, kp_x, kp_y for each of K keypoints] (..., 2 + 2K).
 
-    The block pose maps a local point p to world ``(bx, by) + R(angle) p`` (pymunk's body
-    transform), applied here to all states at once instead of one shapely call per state.
+    The keypoints are the env's (``pusht_geometry.KEYPOINTS_LOCAL``), put in the world by the
+    env's own body-to-world transform for all states at once.
     """
+    from coursekit.envs import pusht_geometry as geo  # numpy/shapely only, no pymunk
+
     state = _check_state(state, "pusht_keypoint_features")
-    local = _local_keypoints()  # (K, 2)
-    c, s = np.cos(state[..., 4]), np.sin(state[..., 4])  # (...,)
-    x = state[..., 2:3] + c[..., None] * local[:, 0] - s[..., None] * local[:, 1]  # (..., K)
-    y = state[..., 3:4] + s[..., None] * local[:, 0] + c[..., None] * local[:, 1]  # (..., K)
-    kps = np.stack([x, y], axis=-1).reshape(*state.shape[:-1], 2 * len(local))  # (..., 2K)
+    kps = geo.local_to_world(geo.KEYPOINTS_LOCAL, state[..., None, 2:5])  # (..., K, 2)
+    kps = kps.reshape(*state.shape[:-1], 2 * len(geo.KEYPOINTS_LOCAL))  # (..., 2K)
     return np.concatenate([state[..., :2], kps], axis=-1).astype(np.float32)  # (..., 2 + 2K)
 
 
@@ -100,8 +92,8 @@ def pusht_agent_pos(state: np.ndarray) -> np.ndarray:
 class FeatureSet:
     """One row of the feature table: which task, which per-step arrays, which function."""
 
-    task: str
-    """'pusht' or 'aloha' (the arm pair: transfer_cube and insertion)."""
+    task: str | None
+    """The world whose observations it reads: 'pusht', 'aloha' (the arm pair's tasks); None: any task."""
     reads: tuple[str, ...]
     """Per-step arrays the function takes, in order (dataset arrays or env observation keys)."""
     fn: Callable[..., np.ndarray]
@@ -148,13 +140,23 @@ def feature_dim(name: str) -> int:
     raise ValueError(f"the dimension of {name!r} depends on the task's objects; read it off the data")
 
 
-def default_features(arrays: Mapping[str, Any]) -> str:
-    """'aloha_state' for arm-pair demonstrations (qpos + env_state), 'pusht_state' for PushT ones."""
-    if "qpos" in arrays and "env_state" in arrays:
-        return "aloha_state"
-    if "state" in arrays:
-        return "pusht_state"
-    raise ValueError(f"cannot tell the task of a dataset with arrays {sorted(arrays)}; pass features=...")
+def default_features(arrays: Mapping[str, Any], meta: Mapping[str, Any] | None = None) -> str:
+    """The default features (``coursekit.tasks``) of the demonstrations' task.
+
+    The task is the one the dataset's meta names ("task" or "env_id"); failing that, the first
+    registered task whose default features read arrays the dataset has (PushT: "state"; the arm
+    pair: "qpos" and "env_state").
+    """
+    from coursekit.tasks.registry import TASKS, task_in_meta
+
+    task = task_in_meta(meta)
+    if task is not None:
+        return task.features
+    for task in TASKS.values():
+        if all(k in arrays for k in get_features(task.features).reads):
+            return task.features
+    raise ValueError(f"cannot tell the task of a dataset with arrays {sorted(arrays)} and no task in its meta; "
+                     f"pass features=...")
 
 
 def training_arrays(dataset: Any, features: str, image_size: tuple[int, int] = (96, 96)

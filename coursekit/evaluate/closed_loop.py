@@ -3,11 +3,11 @@
 :func:`rollout` is policy- and task-agnostic: B environments step together, an executor
 (receding horizon, temporal ensembling, or a student's class) turns chunks into actions, and
 finished episodes are frozen while the others go on. :func:`evaluate` runs a policy through it
-on one task, described by a :class:`TaskAdapter` (``coursekit.evaluate.pusht``,
-``coursekit.evaluate.aloha``): how to build the env, read observations as policy inputs,
-record a state per step and score an episode. Everything is seeded, so a run is reproducible.
+on one task, described by a :class:`TaskAdapter` (``coursekit.evaluate.tasks.RecordAdapter`` reads
+it off the task's record in ``coursekit.tasks``): how to build the env, read observations as policy
+inputs, record a state per step and score an episode. Everything is seeded, so a run is reproducible.
 
-Adding a task is one adapter class and one entry in ``coursekit.evaluate.tasks.TASKS``.
+Adding a task is one record (``coursekit.tasks.register_task``); evaluation then takes it as it is.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ class TaskAdapter(Protocol):
     task: str
     """Task name: 'pusht', 'transfer_cube', 'insertion'."""
     max_steps: int
-    """Protocol steps per episode (PushT 300, arm pair 400)."""
+    """Protocol steps per episode (the task record's ``max_steps``)."""
     record_always: bool
     """True when :meth:`metrics` needs the recorded states (the arm pair's stages)."""
 
