@@ -10,6 +10,7 @@ inputs, so training and evaluation can never disagree. Every policy type accepts
     pusht_image      pusht   state (5) -> image      a 96x96 camera image + agent_pos (2) (obs_type "image")
     aloha_state      aloha   qpos (14), env_state    [qpos (14), env_state (7 cube | 14 peg + socket)]  (21 or 28)
     aloha_qpos       aloha   qpos (14)               qpos only: proprioception (cannot see where the object is)
+    raw_state        any     state (D)               the observation vector as it is (any task whose observation is one vector)
 
 PushT: the simulator never wraps the block angle (demonstrations show it from about -19 to +13
 rad), so a raw angle must never be min-max scaled: two identical poses would get different
@@ -21,7 +22,9 @@ position plus 2-D keypoints of the T); here the keypoints are those of
 Features are computed identically for demonstrations (angle unwrapped) and for environment
 observations (angle mod 2 pi): both are functions of sin/cos of the angle only.
 
-Adding a feature set (or a task) is one :class:`FeatureSet` entry in :data:`FEATURES`.
+A task's default features are named by its record (``coursekit.tasks``). Adding a feature set is
+one :class:`FeatureSet` entry in :data:`FEATURES`; a new task whose observation is a flat vector
+needs none (``raw_state``; not for PushT, whose angle is never wrapped: use ``pusht_state``).
 """
 
 from __future__ import annotations
@@ -83,6 +86,14 @@ def aloha_qpos_features(qpos: np.ndarray) -> np.ndarray:
     return np.asarray(qpos, dtype=np.float32)
 
 
+def raw_state_features(state: np.ndarray) -> np.ndarray:
+    """The observation vector (..., D) as it is, float32 (refused if not finite)."""
+    state = np.asarray(state, dtype=np.float64)
+    if state.ndim < 1 or not np.all(np.isfinite(state)):
+        raise ValueError(f"raw_state_features: expected finite observation vectors (..., D), got shape {state.shape}")
+    return state.astype(np.float32)  # (..., D)
+
+
 def pusht_agent_pos(state: np.ndarray) -> np.ndarray:
     """The low-dim part of 'pusht_image': [agent_x, agent_y] (..., 2) of PushT states (..., 5)."""
     return _check_state(state, "pusht_agent_pos")[..., :2].astype(np.float32)
@@ -119,6 +130,7 @@ FEATURES: dict[str, FeatureSet] = {
     "pusht_image": FeatureSet("pusht", ("state",), pusht_agent_pos, obs_type="image"),
     "aloha_state": FeatureSet("aloha", ("qpos", "env_state"), aloha_state_features),
     "aloha_qpos": FeatureSet("aloha", ("qpos",), aloha_qpos_features),
+    "raw_state": FeatureSet(None, ("state",), raw_state_features),
 }
 """Feature name (stored in a policy's config) -> :class:`FeatureSet`, for every task and policy."""
 
