@@ -10,7 +10,7 @@ inputs, so training and evaluation can never disagree. Every policy type accepts
     pusht_image      pusht   state (5) -> image      a 96x96 camera image + agent_pos (2) (obs_type "image")
     aloha_state      aloha   qpos (14), env_state    [qpos (14), env_state (7 cube | 14 peg + socket)]  (21 or 28)
     aloha_qpos       aloha   qpos (14)               qpos only: proprioception (cannot see where the object is)
-    raw_state        any     state (D)               the observation vector as it is (any task whose observation is one vector)
+    raw_state        any     state (D)               the observation vector as it is (a task observing one vector)
 
 PushT: the simulator never wraps the block angle (demonstrations show it from about -19 to +13
 rad), so a raw angle must never be min-max scaled: two identical poses would get different

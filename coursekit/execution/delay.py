@@ -2,10 +2,10 @@
 
 Every executor of chapters 5 and 8 assumes the policy answers instantly. On a robot it does
 not: a chunk that takes L seconds to compute at a control period of P seconds arrives
-d = ceil(L / P) control steps after it was requested (a task's ``control_hz`` in
-``coursekit.tasks``: PushT 10 Hz, the arm pair 50 Hz), and the robot must do something in the meantime. This module SIMULATES that delay in
-step time: the chunk requested at step r is computed at once (from the observations up to r)
-but handed to the robot only at step r + d. No threads, no clocks: the outcome depends only on
+d = ceil(L / P) control steps after it was requested (P = 1 / a task's ``control_hz`` in
+``coursekit.tasks``: PushT 10 Hz, the arm pair 50 Hz), and the robot must do something in the
+meantime. This module SIMULATES that delay in step time: the chunk requested at step r is
+computed at once (from the observations up to r) but handed to the robot only at step r + d. No threads, no clocks: the outcome depends only on
 the seeds, so it is a measurement, not a race.
 
 Glossary: To = n_obs_steps, Tp = horizon (ACT: k), Ta = n_action_steps, d = delay. A chunk

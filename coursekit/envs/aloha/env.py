@@ -6,9 +6,10 @@
 
 Action (14,) float: absolute joint targets for the position servos, in the layout of
 ``coursekit.envs.aloha.model`` ([left 6 joints, left gripper g, right 6 joints, right gripper g]).
-One step = 10 physics steps of 2 ms (the arm pair's 50 Hz control, ``coursekit.tasks.aloha.CONTROL_HZ``). Joint targets outside the joint ranges and
-gripper commands outside [-0.34, 1.0] are CLIPPED to those bounds (the action space's low/high);
-an action of the wrong shape or with NaN/inf raises ValueError.
+One step = 10 physics steps of 2 ms (the arm pair's 50 Hz control, ``coursekit.tasks.aloha.CONTROL_HZ``).
+Joint targets outside the joint ranges and gripper commands outside [-0.34, 1.0] are CLIPPED to
+those bounds (the action space's low/high); an action of the wrong shape or with NaN/inf raises
+ValueError.
 
 Observations (``obs_type``):
     "state"  (default) dict: "qpos" (14,) joint angles + normalised grippers,
