@@ -52,7 +52,7 @@ class TaskAdapter(Protocol):
 
 
 def rollout(predict_chunk: Callable[[Any], Any], make_env: Callable[[], Any], obs_fn: Callable[[list[Any]], Any],
-            seeds: Sequence[int], executor_factory: Callable[[Callable[[Any], Any]], Any], max_steps: int = 300,
+            seeds: Sequence[int], executor_factory: Callable[[Callable[[Any], Any]], Any], max_steps: int,
             progress: bool = True, record: bool = False, state_fn: Callable[[Any], np.ndarray] | None = None,
             desc: str = "eval") -> EvalResult:
     """Run one episode per seed, all environments in lock-step, and collect the outcomes.
@@ -63,7 +63,7 @@ def rollout(predict_chunk: Callable[[Any], Any], make_env: Callable[[], Any], ob
         obs_fn: list of B raw env observations -> the policy's per-step input (B, ...) (array or dict).
         seeds: reset seed of each episode.
         executor_factory: predict_chunk -> executor with ``reset(obs)`` / ``act(obs) -> (B, Da)``.
-        max_steps: step limit per episode.
+        max_steps: step limit per episode (a task's protocol: its record's ``max_steps``).
         record: keep states (via ``state_fn(env)``, default ``env.unwrapped.get_state()``) and actions.
     """
     if len(seeds) == 0:
