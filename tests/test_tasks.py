@@ -152,7 +152,7 @@ def test_unregistering_removes_the_task_and_its_gym_id():
 
 
 @pytest.mark.parametrize("policy", sorted(POLICY_TYPES))
-def test_collect_train_and_eval_run_on_a_registered_task(policy, reach, tmp_path, train_then_eval):
+def test_collect_train_and_eval_run_on_a_registered_task(policy, reach, tmp_path, train_then_eval, capsys):
     data = tmp_path / "reach.npz"
     assert main(["collect", "reach", "--episodes", "3", "--out", str(data), "--no-progress"]) == 0
     info, summary = train_then_eval(policy, data, tmp_path, max_steps=6)
@@ -161,6 +161,9 @@ def test_collect_train_and_eval_run_on_a_registered_task(policy, reach, tmp_path
     assert main(["eval", str(tmp_path / "run"), "--episodes", "1", "--no-progress", "--json",
                  str(tmp_path / "full.json")]) == 0
     assert json.loads((tmp_path / "full.json").read_text())["max_steps"] == reach.max_steps  # the record's protocol
+    assert main(["eval", str(tmp_path / "run"), "--episodes", "1", "--no-progress",  # no replay drawing: refused first
+                 "--record", str(tmp_path / "replay")]) == 2
+    assert "task 'reach1d' has no replay drawing" in capsys.readouterr().err and not (tmp_path / "replay").exists()
 
 
 def _code_strings(path: Path) -> list[str]:

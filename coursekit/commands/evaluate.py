@@ -108,7 +108,10 @@ def run(args: argparse.Namespace) -> int:
         except ValueError as exc:
             raise ValueError(f"{args.checkpoint} holds a {policy.policy_type!r} policy: {exc}") from None
     sampling = {k: v for k, v in (("sampler", args.sampler), ("num_inference_steps", args.steps)) if v is not None}
-    adapter = make_adapter(task_of(policy, info.get("dataset")), policy)
+    task = task_of(policy, info.get("dataset"))
+    if args.record is not None and task.replay is None:
+        raise ValueError(f"--record {args.record}: task {task.name!r} has no replay drawing (its record's replay is None)")
+    adapter = make_adapter(task, policy)
     result = evaluate(policy, adapter, seeds, max_steps=args.max_steps, sampling=sampling, seed=args.seed,
                       dataset_meta=info.get("dataset"), progress=not args.no_progress, record=args.record is not None)
     summary = {"checkpoint": str(args.checkpoint), **result.summary()}
