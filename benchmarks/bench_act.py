@@ -43,7 +43,6 @@ COMMAND = ".venv/bin/python -m benchmarks.bench_act"
 SECTION = "ACT"
 SECTIONS = ("latency", "cube", "insertion", "dp_cube", "act_pusht")
 TASK_LABEL = {"transfer_cube": "transfer cube", "insertion": "insertion"}
-COLLECT = {"transfer_cube": "collect_transfer_cube", "insertion": "collect_insertion"}
 
 
 def _median_ms(fn, repeats: int) -> list[float]:
@@ -114,9 +113,9 @@ def _dataset(task: str, args: argparse.Namespace):
     path = Path(args.data_dir) / f"aloha_{task}_{n}ep_seed0.npz"
     if path.exists():
         return EpisodeDataset.load(path)
-    import coursekit.experts.aloha_scripted as scripted
+    from coursekit.tasks import get_task
 
-    ds = getattr(scripted, COLLECT[task])(n, 0, progress=not args.no_progress)
+    ds = get_task(task).collect(n, 0, progress=not args.no_progress)
     ds.save(path)
     return ds
 

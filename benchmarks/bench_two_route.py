@@ -47,6 +47,7 @@ HEADS = {"chunked regression": ("regression", {}), "DP DDIM-10": ("diffusion", {
 def two_route_runs(runs_each: int) -> tuple[list, list[int]]:
     """``runs_each`` clockwise then as many anticlockwise expert runs from TWO_WAY_START, and their coin seeds."""
     from coursekit.experts.pusht_planner import TWO_WAY_START
+    from coursekit.tasks import PUSHT
     from coursekit.viz.expert_plots import expert_runs_from
 
     picked: dict[str, list] = {"cw": [], "ccw": []}
@@ -98,8 +99,9 @@ def measure(policy, sampling: dict, runs: list, n_samples: int, n_rollouts: int,
     from coursekit.envs.pusht import PushTEnv
     from coursekit.evaluate.behaviour import stalled_steps
     from coursekit.evaluate.closed_loop import evaluate
-    from coursekit.evaluate.pusht import PushTAdapter
+    from coursekit.evaluate.tasks import RecordAdapter
     from coursekit.experts.pusht_planner import TWO_WAY_START
+    from coursekit.tasks import PUSHT
 
     env = PushTEnv(obs_type="state")
     obs, _ = env.reset(options={"reset_to_state": list(TWO_WAY_START)})
@@ -111,11 +113,11 @@ def measure(policy, sampling: dict, runs: list, n_samples: int, n_rollouts: int,
                                              **sampling))[:, to - 1:]  # (n, Tp - To + 1, 2): from the current step on
     paths = nearest_path(chunks, reference_paths(runs, chunks.shape[1]))
 
-    class TwoRouteAdapter(PushTAdapter):  # PushT as usual, but every episode starts at TWO_WAY_START
+    class TwoRouteAdapter(RecordAdapter):  # PushT as usual, but every episode starts at TWO_WAY_START
         def make_env(self, max_steps: int):
             return ResetToStart(super().make_env(max_steps), TWO_WAY_START)
 
-    adapter = TwoRouteAdapter(policy)
+    adapter = TwoRouteAdapter(PUSHT, policy)
     k = n_rollouts if policy.policy_type == "diffusion" else 1
     r = evaluate(policy, adapter, seeds=list(range(k)), sampling=sampling, seed=seed, progress=False, record=True)
     stall = stalled_steps(r.states, r.length)
@@ -145,13 +147,14 @@ def main(argv: list[str] | None = None) -> int:
     from coursekit.nn.unet1d import UNet1DConfig
     from coursekit.policies import make_policy
     from coursekit.stats import rate_estimate
+    from coursekit.tasks import PUSHT
     from coursekit.train import TrainConfig, train
 
     torch.set_num_threads(args.threads)
     runs, coins = two_route_runs(args.runs_each)
     data = EpisodeDataset.from_episodes([{"state": r.states, "action": r.actions, "coverage": r.coverage,
                                           "phase": r.phases} for r in runs],
-                                        {"env_id": "coursekit/PushT-v0", "obs_type": "state", "episode_seeds": [],
+                                        {"env_id": PUSHT.gym_id, "obs_type": "state", "episode_seeds": [],
                                          "two_route_coin_seeds": coins})
     print(f"{len(runs)} expert runs from TWO_WAY_START (coin seeds {coins}): {data.n_steps} steps", flush=True)
     tag = f"runs{args.runs_each}_s{args.steps}_u{'-'.join(map(str, args.down_dims))}"

@@ -36,6 +36,7 @@ _LAZY = {
     "train": "coursekit.train:",
     "evaluate": "coursekit.evaluate:",
     "teleop": "coursekit.teleop:",
+    "tasks": "coursekit.tasks:",
     "check": "coursekit.grading.check:check",
 }
 
@@ -44,12 +45,13 @@ __getattr__, __dir__ = lazy_loader(__name__, _LAZY)
 
 
 def _register_gym_envs() -> None:
-    """Register the gymnasium ids (cheap: entry points are strings, nothing heavy is imported)."""
+    """Register every task's gymnasium id (cheap: entry points are strings, nothing heavy is imported)."""
+    from coursekit.tasks.registry import register_gym_envs
+
     try:
-        from coursekit.envs.registration import register_all
+        register_gym_envs()
     except ImportError:  # gymnasium missing: the envs are unusable anyway, the rest still works
         return
-    register_all()
 
 
 _register_gym_envs()

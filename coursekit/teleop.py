@@ -37,7 +37,8 @@ import numpy as np
 
 from coursekit.data.episodes import DatasetError, EpisodeDataset
 from coursekit.envs import pusht_geometry as geo
-from coursekit.envs.pusht import CONTROL_HZ, PushTEnv
+from coursekit.envs.pusht import PushTEnv
+from coursekit.tasks.pusht import PUSHT
 
 __all__ = ["TeleopConfig", "TeleopRecorder", "mix", "path_targets", "replay", "route_side"]
 
@@ -51,8 +52,8 @@ PHASE_NAMES = ("settle", "travel", "push", "rest")
 class TeleopConfig:
     """Settings of a teleoperation session."""
 
-    max_steps: int = 300
-    """An episode stops itself after this many control steps (the reference evaluation length)."""
+    max_steps: int = PUSHT.max_steps
+    """An episode stops itself after this many control steps (default: the evaluation protocol's length)."""
     rest_steps: int = 5
     """Steps still recorded after the first success (coverage > 0.95) before the episode stops
     itself, as the expert's rest steps: policies learn when to stop."""
@@ -222,8 +223,8 @@ class TeleopRecorder:
         if not self.episodes:
             raise DatasetError("no episode kept yet: record one (start, step, stop) first")
         meta = {
-            "env_id": "coursekit/PushT-v0", "obs_type": "state", "expert": SOURCE,
-            "n_episodes": len(self.episodes), "control_hz": CONTROL_HZ,
+            "env_id": PUSHT.gym_id, "obs_type": "state", "expert": SOURCE,
+            "n_episodes": len(self.episodes), "control_hz": PUSHT.control_hz,
             "episode_resets": self.resets,
             "episode_seeds": [r["seed"] for r in self.resets if "seed" in r],
             "success_steps": self.success_steps, "route_choices": [[] for _ in self.episodes],

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import json
 import os
 import warnings
+from pathlib import Path
 
 import pytest
 
@@ -36,3 +38,30 @@ def chromium(request):
         warnings.warn(reason, stacklevel=1)
         pytest.skip(reason)
     return path
+
+
+TINY = {"diffusion": ["--down-dims", "16,32"], "regression": ["--down-dims", "16,32"], "flow": ["--down-dims", "16,32"],
+        "act": ["--chunk-size", "10"]}
+"""`coursekit train` flags that make each policy type tiny (a type without an entry trains at its default size)."""
+SAMPLES = {"diffusion": ["--steps", "2"], "flow": ["--steps", "2"]}
+"""`coursekit eval` flags of the policy types that sample: two denoising / integration steps."""
+
+
+def _train_then_eval(policy: str, data: Path, folder: Path, max_steps: int = 4, train_steps: int = 3, episodes: int = 1,
+                     eval_args: tuple[str, ...] = ()) -> tuple[dict, dict]:
+    from coursekit.cli import main
+
+    run = folder / "run"
+    assert main(["train", "--policy", policy, "--data", str(data), "--steps", str(train_steps), "--batch-size", "4",
+                 "--warmup-steps", "1", "--out", str(run), "--threads", "1", "--no-progress", *TINY.get(policy, [])]) == 0
+    out = folder / "eval.json"
+    assert main(["eval", str(run), "--episodes", str(episodes), "--max-steps", str(max_steps), "--threads", "1",
+                 "--no-progress", "--json", str(out), *SAMPLES.get(policy, []), *eval_args]) == 0
+    return json.loads((run / "config.json").read_text()), json.loads(out.read_text())
+
+
+@pytest.fixture
+def train_then_eval():
+    """`coursekit train` (tiny, a few steps) into ``folder/run``, then `coursekit eval` on a short episode:
+    returns (the checkpoint's config.json, the eval summary)."""
+    return _train_then_eval

@@ -10,9 +10,10 @@ pytest.importorskip("mujoco")
 
 from coursekit.data import EpisodeDataset  # noqa: E402
 from coursekit.data.features import default_features  # noqa: E402
-from coursekit.evaluate.aloha import STATE_COLUMNS, evaluate_aloha  # noqa: E402
+from coursekit.evaluate.aloha import evaluate_aloha  # noqa: E402
 from coursekit.execution.receding import RecedingHorizon  # noqa: E402
 from coursekit.policies.factory import make_policy  # noqa: E402
+from coursekit.tasks.aloha import STATE_COLUMNS  # noqa: E402
 from coursekit.train import TrainConfig  # noqa: E402
 
 

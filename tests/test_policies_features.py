@@ -43,7 +43,12 @@ def test_keypoint_features_match_env_observation_and_geometry():
 
 
 def test_registry_and_bad_input():
-    assert set(FEATURES) == {"pusht_state", "pusht_keypoints", "pusht_image", "aloha_state", "aloha_qpos"}
+    assert set(FEATURES) == {"pusht_state", "pusht_keypoints", "pusht_image", "aloha_state", "aloha_qpos", "raw_state"}
+    raw = get_features("raw_state")
+    assert raw.task is None  # fits every task
+    np.testing.assert_array_equal(raw(np.array([[0.5, -1.25]])), np.array([[0.5, -1.25]], dtype=np.float32))
+    with pytest.raises(ValueError, match="finite observation vectors"):
+        raw(np.array([np.inf]))
     assert feature_dim("pusht_state") == 6 and feature_dim("aloha_qpos") == 14
     with pytest.raises(ValueError, match="unknown observation features"):
         get_features("pusht_pixels")

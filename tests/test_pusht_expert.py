@@ -32,12 +32,9 @@ def test_clearance_matches_shapely():
     np.testing.assert_allclose(clearance.segment_distance(a, b), want_segments, atol=1e-9)
 
 
-def test_frames_and_keypoints_agree_with_geometry():
+def test_keypoints_and_pose_error_agree_with_geometry():
     pose = (201.0, 333.0, -7.3)
-    pts = np.array([[3.0, 4.0], [-60.0, 30.0]])
-    np.testing.assert_allclose(clearance.local_to_world(pts, pose), geo.local_to_world(pts, pose))
-    np.testing.assert_allclose(clearance.world_to_local(clearance.local_to_world(pts, pose), pose), pts)
-    np.testing.assert_allclose(keypoints(np.array(pose)), geo.block_keypoints(pose))
+    np.testing.assert_array_equal(keypoints(np.array(pose)), geo.block_keypoints(pose))
     assert pose_error(np.array(geo.GOAL_POSE)) == pytest.approx(0.0, abs=1e-9)
     assert pose_error(np.array(geo.GOAL_POSE) + [0, 0, 2 * math.pi]) == pytest.approx(0.0, abs=1e-9)
     assert pose_error(np.array(geo.GOAL_POSE) + [3.0, 4.0, 0.0]) == pytest.approx(5.0)
@@ -66,7 +63,7 @@ def test_push_model_small_push_matches_closed_form():
     np.testing.assert_allclose(new[:, 2] - pose[2], j * c.lever / geo.T_MOMENT, rtol=1e-6, atol=1e-15)
     cog0 = geo.cog_world(pose)
     cog1 = np.array([geo.cog_world(p) for p in new])
-    normal_world = clearance.local_to_world(c.normal, (0.0, 0.0, pose[2]))
+    normal_world = geo.local_to_world(c.normal, (0.0, 0.0, pose[2]))
     np.testing.assert_allclose(cog1 - cog0, j[:, None] * normal_world, rtol=1e-4, atol=1e-12)
 
 
@@ -113,7 +110,7 @@ def test_routes_keep_clear_and_wind_the_right_way():
             if not np.isfinite(length):
                 continue
             route = planner.route(pose, start, goal, side)
-            local = clearance.world_to_local(route.points, pose)
+            local = geo.world_to_local(route.points, pose)
             assert clearance.segment_distance(local[:-1], local[1:]).min() >= 21.0 - 0.5
             assert route.length == pytest.approx(length)
             sweep = _sweep(local, np.asarray(geo.T_COG_LOCAL))

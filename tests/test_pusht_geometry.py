@@ -28,6 +28,33 @@ def test_local_to_world_matches_rotation_matrix():
     np.testing.assert_allclose(geo.local_to_world(pt, pose)[0], expected)
 
 
+def test_one_body_to_world_transform_vectorised_over_poses():
+    """Many poses at once give, bit for bit, what one pose at a time gives; each is R(angle) p + (x, y)
+    (checked against the rotation matrix); world_to_local inverts it; every user reads this one transform."""
+    from coursekit.data.features import pusht_keypoint_features
+    from coursekit.experts.pusht_push_model import keypoints
+
+    rng = np.random.default_rng(0)
+    poses = np.column_stack([rng.uniform(0, 512, (50, 2)), rng.uniform(-20, 20, 50)])  # (50, 3)
+    pts = rng.uniform(-100, 150, (7, 2))
+    batch = geo.local_to_world(pts, poses[:, None, :])  # (50, 7, 2)
+    assert batch.shape == (50, 7, 2)
+    for pose, world in zip(poses, batch):
+        np.testing.assert_array_equal(world, geo.local_to_world(pts, pose))
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        np.testing.assert_allclose(world, pts @ np.array([[c, -s], [s, c]]).T + pose[:2], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(geo.world_to_local(batch, poses[:, None, :]), np.broadcast_to(pts, batch.shape),
+                               rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(keypoints(poses), np.stack([geo.block_keypoints(p) for p in poses]))
+    states = np.column_stack([rng.uniform(0, 512, (50, 2)), poses])  # (50, 5) [ax, ay, bx, by, angle]
+    np.testing.assert_array_equal(pusht_keypoint_features(states)[:, 2:],
+                                  np.stack([geo.block_keypoints(p).reshape(-1) for p in poses]).astype(np.float32))
+    with pytest.raises(ValueError, match=r"pose must have shape \(\.\.\., 3\)"):
+        geo.local_to_world(pts, (1.0, 2.0))
+    with pytest.raises(ValueError, match="pose must be finite"):
+        geo.local_to_world(pts, (1.0, 2.0, float("nan")))
+
+
 def test_coverage_at_goal_is_one_and_far_away_zero():
     assert geo.coverage(geo.GOAL_POSE) == pytest.approx(1.0, abs=1e-12)
     assert geo.coverage((256.0 + 300, 256.0, 0.0)) == 0.0

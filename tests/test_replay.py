@@ -15,9 +15,9 @@ pytest.importorskip("meshcat")
 pytest.importorskip("mujoco")
 import umsgpack  # noqa: E402  (meshcat's own message format)
 
+from coursekit.tasks import INSERTION, PUSHT, TRANSFER_CUBE  # noqa: E402
 from coursekit.viz.replay import (  # noqa: E402
-    ARM_CAMERA, ARM_PAIR_TASKS, CAPTION_H, GAP, HEADER_H, MARGIN, PANEL_HW, EpisodeRecording, panel_origin, timeline,
-    write_replay,
+    CAPTION_H, GAP, HEADER_H, MARGIN, EpisodeRecording, panel_origin, timeline, write_replay,
 )
 
 
@@ -99,7 +99,7 @@ def test_pusht_replay_follows_the_recorded_states(tmp_path, scene, pusht_episode
 
     # frames.png: one row per episode; each panel is exactly the env renderer's picture
     grid = np.asarray(Image.open(out["frames"]).convert("RGB"))
-    h, w = PANEL_HW["pusht"]
+    h, w = PUSHT.replay.panel_hw
     assert grid.shape == (2 * MARGIN + HEADER_H + 2 * (CAPTION_H + h + GAP) - GAP, 2 * MARGIN + 2 * w + GAP, 3)
     renderer = PushTRenderer((h, w))
     for r, ep in enumerate(pusht_episodes):
@@ -145,11 +145,11 @@ def test_arm_pair_replay(tmp_path, scene, cube_episode):
     assert xpos[1][2] > xpos[0][2] + 0.05, "the demonstration should have lifted the cube"
 
     grid = np.asarray(Image.open(out["frames"]).convert("RGB"))
-    h, w = PANEL_HW["transfer_cube"]
+    h, w = TRANSFER_CUBE.replay.panel_hw
     assert grid.shape == (2 * MARGIN + HEADER_H + CAPTION_H + h, 2 * MARGIN + 2 * w + GAP, 3)
     for c, q in enumerate(cube_episode.states[[0, -1]]):
         env.set_physics_state(q)
-        want = env.render_camera(ARM_CAMERA, (h, w)).astype(int)
+        want = env.render_camera(TRANSFER_CUBE.replay.camera, (h, w)).astype(int)
         y, x = panel_origin(0, c, "transfer_cube")
         assert np.abs(grid[y:y + h, x:x + w].astype(int) - want).max() <= 1
     env.close()
@@ -171,7 +171,7 @@ def test_insertion_replay_from_a_live_env(tmp_path, scene):
                        scene=scene)
     (anim,) = [c for c in commands(out["html"].read_text()) if c["type"] == "set_animation"]
     assert {a["clip"]["fps"] for a in anim["animations"]} == {25}
-    assert Image.open(out["frames"]).size[1] == 2 * MARGIN + HEADER_H + CAPTION_H + PANEL_HW["insertion"][0]
+    assert Image.open(out["frames"]).size[1] == 2 * MARGIN + HEADER_H + CAPTION_H + INSERTION.replay.panel_hw[0]
 
 
 def test_bad_input_is_refused_naming_the_value(tmp_path, scene, pusht_episodes, cube_episode):
@@ -181,7 +181,7 @@ def test_bad_input_is_refused_naming_the_value(tmp_path, scene, pusht_episodes, 
     with pytest.raises(ValueError, match=r"seed 0\): transfer_cube states must be MuJoCo qpos of shape \(T \+ 1, 23\)"):
         write_replay(tmp_path, "transfer_cube", [EpisodeRecording(0, ep.states, 1.0, True)])
     recorded = np.column_stack([np.zeros((len(cube_episode.states), 16)), cube_episode.states])
-    with pytest.raises(ValueError, match=r"evaluate_aloha's recorded row .* pass states\[:, 16:\]"):
+    with pytest.raises(ValueError, match=r"recorded evaluation row of transfer_cube: pass states\[:, 16:\]"):
         write_replay(tmp_path, "transfer_cube", [EpisodeRecording(0, recorded, 1.0, True)])
     with pytest.raises(ValueError, match=r"seed 0\): PushT states must have shape"):
         write_replay(tmp_path, "pusht", [cube_episode])
@@ -215,7 +215,10 @@ def test_never_overwrites_a_file_it_did_not_create(tmp_path, scene, pusht_episod
         write_replay(tmp_path / "file", "pusht", pusht_episodes[:1], scene=scene)
 
 
-def test_task_names_match_the_envs():
-    from coursekit.envs.aloha.tasks import TASKS
+def test_every_task_with_a_replay_drawing_is_drawn_by_a_viewer():
+    from coursekit.envs.aloha.tasks import TASKS as ARM_TASKS
+    from coursekit.tasks import TASKS
+    from coursekit.viz.replay_viewers import VIEWERS
 
-    assert sorted(ARM_PAIR_TASKS) == sorted(TASKS)
+    assert all(t.replay.viewer in VIEWERS for t in TASKS.values() if t.replay is not None)
+    assert sorted(ARM_TASKS) == sorted(t.name for t in TASKS.values() if t.replay and t.replay.viewer == "mujoco")

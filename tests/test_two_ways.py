@@ -8,7 +8,7 @@ import pytest
 
 from coursekit.envs import pusht_geometry as geo
 from coursekit.evaluate.behaviour import rms_jerk, stalled_steps, still_steps
-from coursekit.experts.pusht_clearance import local_to_world
+from coursekit.envs.pusht_geometry import local_to_world
 from coursekit.experts.pusht_two_ways import first_decision, path_side, path_sweep
 
 

@@ -3,27 +3,23 @@
 from __future__ import annotations
 
 import argparse
-import importlib
 import sys
 import time
 from pathlib import Path
 
 from coursekit.commands._args import MAX_SEED, output_path, positive_int, seed_int
+from coursekit.tasks.registry import TASKS, get_task, task_names  # plain data: `coursekit --help` stays instant
 
-HELP = "generate scripted demonstrations (pusht, aloha-cube, aloha-insertion) into a dataset file"
-
-# task -> "module:function" with signature (n_episodes, seed, progress=True) -> EpisodeDataset
-TASKS: dict[str, str] = {
-    "pusht": "coursekit.experts.pusht_planner:collect_dataset",
-    "aloha-cube": "coursekit.experts.aloha_scripted:collect_transfer_cube",
-    "aloha-insertion": "coursekit.experts.aloha_scripted:collect_insertion",
-}
-DEFAULT_EPISODES = {"pusht": 200, "aloha-cube": 50, "aloha-insertion": 50}
+HELP = f"generate scripted demonstrations of a task ({', '.join(task_names())}) into a dataset file"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("task", choices=sorted(TASKS), help="which task's scripted expert to run")
-    parser.add_argument("--episodes", type=positive_int, default=None, help="number of demonstrations (default: 200 PushT, 50 ALOHA)")
+    with_expert = [t for t in TASKS.values() if t.expert is not None]
+    parser.add_argument("task", choices=[n for n in task_names(aliases=True) if get_task(n).expert is not None],
+                        help="which task's scripted expert to run (a task name or an alias such as aloha-cube)")
+    parser.add_argument("--episodes", type=positive_int, default=None,
+                        help="number of demonstrations (default: " + ", ".join(
+                            f"{t.demo_episodes} {t.name}" for t in with_expert) + ")")
     parser.add_argument("--seed", type=seed_int, default=0, help="seed of the first episode; episode i uses seed + i")
     parser.add_argument("--out", type=output_path, default=None, help="output .npz (default: outputs/data/<task>_<episodes>ep_seed<seed>[_noise<levels>][_person].npz)")
     parser.add_argument("--action-noise", default=None,
@@ -42,15 +38,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from coursekit.outputs import claim_output
 
-    episodes = args.episodes if args.episodes is not None else DEFAULT_EPISODES[args.task]
+    task = get_task(args.task)
+    episodes = args.episodes if args.episodes is not None else task.demo_episodes
     if args.seed > MAX_SEED - (episodes - 1):
         raise ValueError(f"--seed must be in [0, {MAX_SEED - (episodes - 1)}] (episode i uses seed + i), got {args.seed}")
-    module_name, func_name = TASKS[args.task].split(":")
-    collect = getattr(importlib.import_module(module_name), func_name)
     extra, tag = {}, ""
     if args.action_noise is not None:
-        if args.task != "pusht":
-            raise ValueError(f"--action-noise is for the pusht expert only, not {args.task!r}")
+        if "action_noise" not in task.expert_options:
+            takers = " / ".join(t.name for t in TASKS.values() if "action_noise" in t.expert_options)
+            raise ValueError(f"--action-noise is for the {takers} expert only, not {args.task!r}")
         from coursekit.experts.pusht_planner import noise_tag, parse_action_noise
 
         extra["action_noise"] = parse_action_noise(args.action_noise)
@@ -68,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
         for leftover in lock.swept:
             print(f"removed {str(leftover)!r}, left by an interrupted earlier run", file=sys.stderr)
         start = time.perf_counter()
-        dataset = collect(episodes, args.seed, progress=not args.no_progress, **extra)
+        dataset = task.collect(episodes, args.seed, progress=not args.no_progress, **extra)
         dataset.save(out, lock=lock)
     seconds = time.perf_counter() - start
     print(f"wrote {out}: {dataset.n_episodes} episodes, {dataset.n_steps} steps in {seconds:.1f} s")

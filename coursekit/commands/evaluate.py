@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from coursekit.commands._args import MAX_SEED, device, nonnegative_float, output_path, positive_int, seed_int
+from coursekit.tasks.registry import TASKS  # plain data: `coursekit --help` stays instant
 
 HELP = "evaluate a policy checkpoint on held-out seeds (PushT score/success, ALOHA stages/strict success)"
 
@@ -26,7 +27,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("checkpoint", type=Path, help="checkpoint directory (from `coursekit train`)")
     parser.add_argument("--episodes", type=positive_int, default=50, help="held-out episodes (default 50)")
     parser.add_argument("--seed-start", type=seed_int, default=None, help="first reset seed (default 100000; episode i uses start + i)")
-    parser.add_argument("--max-steps", type=positive_int, default=None, help="steps per episode (default 300 PushT, 400 ALOHA)")
+    protocol = ", ".join(f"{t.max_steps} {t.name}" for t in TASKS.values())
+    parser.add_argument("--max-steps", type=positive_int, default=None,
+                        help=f"steps per episode (default: the task's protocol, {protocol})")
     parser.add_argument("--sampler", choices=["ddim", "ddpm", "euler", "midpoint"], default=None,
                         help="sampler (default: the checkpoint's): ddim/ddpm for diffusion, euler/midpoint for flow")
     parser.add_argument("--steps", type=positive_int, default=None,
@@ -126,7 +129,10 @@ def _evaluate(args: argparse.Namespace, locks: dict[str, Any]) -> int:
         except ValueError as exc:
             raise ValueError(f"{args.checkpoint} holds a {policy.policy_type!r} policy: {exc}") from None
     sampling = {k: v for k, v in (("sampler", args.sampler), ("num_inference_steps", args.steps)) if v is not None}
-    adapter = make_adapter(task_of(policy, info.get("dataset")), policy)
+    task = task_of(policy, info.get("dataset"))
+    if args.record is not None and task.replay is None:
+        raise ValueError(f"--record {args.record}: task {task.name!r} has no replay drawing (its record's replay is None)")
+    adapter = make_adapter(task, policy)
     result = evaluate(policy, adapter, seeds, max_steps=args.max_steps, sampling=sampling, seed=args.seed,
                       dataset_meta=info.get("dataset"), progress=not args.no_progress, record=args.record is not None)
     summary = {"format": SUMMARY_FORMAT, "checkpoint": str(args.checkpoint), **result.summary()}

@@ -125,7 +125,7 @@ def _train(args: argparse.Namespace, lock: Any) -> int:
     _check_flags_apply(args, {f.name for f in dataclasses.fields(get_policy_class(args.policy).config_class)}, fields)
     resolve_device(args.device)  # an unavailable device is refused before the data is read
     dataset = EpisodeDataset.load(args.data)
-    features = args.features or default_features(dataset.arrays)
+    features = args.features or default_features(dataset.arrays, dataset.meta)
     if args.vision is not None and features != "pusht_image":
         raise ValueError(f"--vision {args.vision} applies to image features (--features pusht_image), not {features}")
     overrides = {"lr": args.lr, "batch_size": args.batch_size or (64 if features == "pusht_image" else None),

@@ -10,6 +10,7 @@ inputs, so training and evaluation can never disagree. Every policy type accepts
     pusht_image      pusht   state (5) -> image      a 96x96 camera image + agent_pos (2) (obs_type "image")
     aloha_state      aloha   qpos (14), env_state    [qpos (14), env_state (7 cube | 14 peg + socket)]  (21 or 28)
     aloha_qpos       aloha   qpos (14)               qpos only: proprioception (cannot see where the object is)
+    raw_state        any     state (D)               the observation vector as it is (a task observing one vector)
 
 PushT: the simulator never wraps the block angle (demonstrations show it from about -19 to +13
 rad), so a raw angle must never be min-max scaled: two identical poses would get different
@@ -21,7 +22,9 @@ position plus 2-D keypoints of the T); here the keypoints are those of
 Features are computed identically for demonstrations (angle unwrapped) and for environment
 observations (angle mod 2 pi): both are functions of sin/cos of the angle only.
 
-Adding a feature set (or a task) is one :class:`FeatureSet` entry in :data:`FEATURES`.
+A task's default features are named by its record (``coursekit.tasks``). Adding a feature set is
+one :class:`FeatureSet` entry in :data:`FEATURES`; a new task whose observation is a flat vector
+needs none (``raw_state``; not for PushT, whose angle is never wrapped: use ``pusht_state``).
 """
 
 from __future__ import annotations
@@ -59,25 +62,17 @@ def pusht_state_features(state: np.ndarray) -> np.ndarray:
     return out.astype(np.float32)  # (..., 6)
 
 
-def _local_keypoints() -> np.ndarray:
-    """(K, 2) keypoints of the T in its own frame (pose (0, 0, 0)), from the env's geometry."""
-    from coursekit.envs.pusht_geometry import block_keypoints  # numpy/shapely only, no pymunk
-
-    return np.asarray(block_keypoints((0.0, 0.0, 0.0)), dtype=np.float64)  # (K, 2)
-
-
 def pusht_keypoint_features(state: np.ndarray) -> np.ndarray:
     """[ax, ay, bx, by, angle] (..., 5) -> [ax, ay, kp_x, kp_y for each of K keypoints] (..., 2 + 2K).
 
-    The block pose maps a local point p to world ``(bx, by) + R(angle) p`` (pymunk's body
-    transform), applied here to all states at once instead of one shapely call per state.
+    The keypoints are the env's (``pusht_geometry.KEYPOINTS_LOCAL``), put in the world by the
+    env's own body-to-world transform for all states at once.
     """
+    from coursekit.envs import pusht_geometry as geo  # numpy/shapely only, no pymunk
+
     state = _check_state(state, "pusht_keypoint_features")
-    local = _local_keypoints()  # (K, 2)
-    c, s = np.cos(state[..., 4]), np.sin(state[..., 4])  # (...,)
-    x = state[..., 2:3] + c[..., None] * local[:, 0] - s[..., None] * local[:, 1]  # (..., K)
-    y = state[..., 3:4] + s[..., None] * local[:, 0] + c[..., None] * local[:, 1]  # (..., K)
-    kps = np.stack([x, y], axis=-1).reshape(*state.shape[:-1], 2 * len(local))  # (..., 2K)
+    kps = geo.local_to_world(geo.KEYPOINTS_LOCAL, state[..., None, 2:5])  # (..., K, 2)
+    kps = kps.reshape(*state.shape[:-1], 2 * len(geo.KEYPOINTS_LOCAL))  # (..., 2K)
     return np.concatenate([state[..., :2], kps], axis=-1).astype(np.float32)  # (..., 2 + 2K)
 
 
@@ -91,6 +86,14 @@ def aloha_qpos_features(qpos: np.ndarray) -> np.ndarray:
     return np.asarray(qpos, dtype=np.float32)
 
 
+def raw_state_features(state: np.ndarray) -> np.ndarray:
+    """The observation vector (..., D) as it is, float32 (refused if not finite)."""
+    state = np.asarray(state, dtype=np.float64)
+    if state.ndim < 1 or not np.all(np.isfinite(state)):
+        raise ValueError(f"raw_state_features: expected finite observation vectors (..., D), got shape {state.shape}")
+    return state.astype(np.float32)  # (..., D)
+
+
 def pusht_agent_pos(state: np.ndarray) -> np.ndarray:
     """The low-dim part of 'pusht_image': [agent_x, agent_y] (..., 2) of PushT states (..., 5)."""
     return _check_state(state, "pusht_agent_pos")[..., :2].astype(np.float32)
@@ -100,8 +103,8 @@ def pusht_agent_pos(state: np.ndarray) -> np.ndarray:
 class FeatureSet:
     """One row of the feature table: which task, which per-step arrays, which function."""
 
-    task: str
-    """'pusht' or 'aloha' (the arm pair: transfer_cube and insertion)."""
+    task: str | None
+    """The world whose observations it reads: 'pusht', 'aloha' (the arm pair's tasks); None: any task."""
     reads: tuple[str, ...]
     """Per-step arrays the function takes, in order (dataset arrays or env observation keys)."""
     fn: Callable[..., np.ndarray]
@@ -127,6 +130,7 @@ FEATURES: dict[str, FeatureSet] = {
     "pusht_image": FeatureSet("pusht", ("state",), pusht_agent_pos, obs_type="image"),
     "aloha_state": FeatureSet("aloha", ("qpos", "env_state"), aloha_state_features),
     "aloha_qpos": FeatureSet("aloha", ("qpos",), aloha_qpos_features),
+    "raw_state": FeatureSet(None, ("state",), raw_state_features),
 }
 """Feature name (stored in a policy's config) -> :class:`FeatureSet`, for every task and policy."""
 
@@ -148,13 +152,23 @@ def feature_dim(name: str) -> int:
     raise ValueError(f"the dimension of {name!r} depends on the task's objects; read it off the data")
 
 
-def default_features(arrays: Mapping[str, Any]) -> str:
-    """'aloha_state' for arm-pair demonstrations (qpos + env_state), 'pusht_state' for PushT ones."""
-    if "qpos" in arrays and "env_state" in arrays:
-        return "aloha_state"
-    if "state" in arrays:
-        return "pusht_state"
-    raise ValueError(f"cannot tell the task of a dataset with arrays {sorted(arrays)}; pass features=...")
+def default_features(arrays: Mapping[str, Any], meta: Mapping[str, Any] | None = None) -> str:
+    """The default features (``coursekit.tasks``) of the demonstrations' task.
+
+    The task is the one the dataset's meta names ("task" or "env_id"); failing that, the first
+    registered task whose default features read arrays the dataset has (PushT: "state"; the arm
+    pair: "qpos" and "env_state").
+    """
+    from coursekit.tasks.registry import TASKS, task_in_meta
+
+    task = task_in_meta(meta)
+    if task is not None:
+        return task.features
+    for task in TASKS.values():
+        if all(k in arrays for k in get_features(task.features).reads):
+            return task.features
+    raise ValueError(f"cannot tell the task of a dataset with arrays {sorted(arrays)} and no task in its meta; "
+                     f"pass features=...")
 
 
 def training_arrays(dataset: Any, features: str, image_size: tuple[int, int] = (96, 96)

@@ -9,11 +9,13 @@ comparable (facts in ``shared/reference/pusht.md``; geometry in ``pusht_geometry
   damping ** dt = 0 each substep, so the T moves only while it is being pushed.
 - The pusher is a KINEMATIC circle (radius 15): infinite mass, never deflected by the block and
   not stopped by the walls (it can shove the T out of the arena, as in the reference).
-- Action = absolute target (x, y) for the pusher. One env step = 10 substeps of dt = 0.01; each
-  substep applies the PD law v += (k_p (a - x) + k_v (0 - v)) dt with k_p = 100, k_v = 20, then
-  ``space.step(dt)``. (Discrete critically-damped-ish tracking; the pusher lags its target.)
+- Action = absolute target (x, y) for the pusher, at the task's control rate (``PUSHT.control_hz``,
+  10 Hz): one env step = SIM_HZ / control_hz = 10 substeps of dt = 0.01; each substep applies the
+  PD law v += (k_p (a - x) + k_v (0 - v)) dt with k_p = 100, k_v = 20, then ``space.step(dt)``.
+  (Discrete critically-damped-ish tracking; the pusher lags its target.)
 - coverage = area(goal T intersect block T) / area(goal T); reward = clip(coverage / 0.95, 0, 1);
-  ``terminated`` when coverage > 0.95; ``truncated`` after ``max_episode_steps`` (300) steps.
+  ``terminated`` when coverage > 0.95; ``truncated`` after ``max_episode_steps`` steps (default:
+  the task's protocol, ``PUSHT.max_steps``).
 
 Observations (``obs_type``):
 
@@ -45,14 +47,13 @@ from gymnasium import spaces
 from coursekit.envs import pusht_geometry as geo
 from coursekit.envs.checks import check_reset_args, finite_array
 from coursekit.envs.image_size import size_hw
+from coursekit.tasks.pusht import PUSHT
 
 OBS_TYPES = ("state", "keypoints", "pixels", "pixels_agent_pos")
 RESET_OPTIONS = {"reset_to_state": "(5,) [ax, ay, bx, by, angle] start state (None: the seeded draw)"}
 
 SIM_HZ = 100
-"""Physics substeps per second (dt = 0.01)."""
-CONTROL_HZ = 10
-"""Env steps (actions) per second: 10 substeps per step."""
+"""Physics substeps per second (dt = 0.01); an env step is SIM_HZ / PUSHT.control_hz of them."""
 K_P, K_V = 100.0, 20.0
 """PD gains of the pusher's tracking law (reference values)."""
 
@@ -65,14 +66,14 @@ class PushTEnv(gym.Env):
         render_mode: None or "rgb_array" (``render()`` returns (H, W, 3) uint8 at ``render_size``,
             with the latest action target drawn as a small cross).
         render_size: size of ``render()`` images, int or (H, W).
-        max_episode_steps: episode length before ``truncated`` (reference evaluation: 300).
+        max_episode_steps: episode length before ``truncated`` (default: the protocol's, ``PUSHT.max_steps``).
         obs_size: size of pixel observations, int or (H, W) (reference: 96).
     """
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": CONTROL_HZ}
+    metadata = {"render_modes": ["rgb_array"], "render_fps": PUSHT.control_hz}
 
     def __init__(self, obs_type: str = "state", render_mode: str | None = None,
-                 render_size=96, max_episode_steps: int = 300, obs_size=96):
+                 render_size=96, max_episode_steps: int = PUSHT.max_steps, obs_size=96):
         if obs_type not in OBS_TYPES:
             raise ValueError(f"obs_type must be one of {OBS_TYPES}, got {obs_type!r}")
         if render_mode not in (None, "rgb_array"):
@@ -86,7 +87,7 @@ class PushTEnv(gym.Env):
         self.max_episode_steps = int(max_episode_steps)
         self.goal_pose = geo.GOAL_POSE
         self.dt = 1.0 / SIM_HZ
-        self.n_substeps = SIM_HZ // CONTROL_HZ
+        self.n_substeps = round(SIM_HZ / PUSHT.control_hz)
 
         self.action_space = spaces.Box(0.0, geo.WORLD_SIZE, shape=(2,), dtype=np.float64)
         self.observation_space = self._make_observation_space()

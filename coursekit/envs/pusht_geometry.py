@@ -8,7 +8,8 @@ Conventions (those of the reference environment, see ``shared/reference/pusht.md
   (image convention). A pose is ``(x, y, angle)``: the world position of the block's BODY
   ORIGIN (the middle of the crossbar's top edge, not the centre of gravity) and its rotation
   in radians. ``local_to_world`` rotates by ``angle`` with the usual matrix
-  [[cos, -sin], [sin, cos]], as pymunk does; with y down this looks clockwise on screen.
+  [[cos, -sin], [sin, cos]], as pymunk does; with y down this looks clockwise on screen. It is
+  the ONE body-to-world transform of the library (env, expert, features), vectorised over poses.
 - The T (scale 30) is two boxes on one body, in body-local coordinates::
 
         (-60,0) +--------------------+ (60,0)       crossbar 120 x 30
@@ -113,12 +114,35 @@ def as_state5(state) -> np.ndarray:
     return s[:5]
 
 
+def _check_poses(pose) -> np.ndarray:
+    p = np.asarray(pose, dtype=np.float64)
+    if p.ndim == 0 or p.shape[-1] != 3:
+        raise ValueError(f"pose must have shape (..., 3) = (x, y, angle), got shape {p.shape}: {pose!r}")
+    if not np.all(np.isfinite(p)):
+        raise ValueError(f"pose must be finite, got {pose!r}")
+    return p
+
+
 def local_to_world(points: np.ndarray, pose) -> np.ndarray:
-    """Map body-local points (N, 2) to world coordinates (N, 2) for ``pose`` = (x, y, angle)."""
-    x, y, a = _check_pose(pose)
-    c, s = math.cos(a), math.sin(a)
-    rot_t = np.array([[c, s], [-s, c]])  # transpose of [[c, -s], [s, c]] (row-vector points)
-    return np.asarray(points, dtype=np.float64) @ rot_t + (x, y)  # (N, 2)
+    """Body-local points (..., 2) -> world (..., 2) for poses (..., 3) = (x, y, angle), broadcasting.
+
+    ``world = (x, y) + R(angle) p`` (pymunk's body transform). One pose (3,) maps every point;
+    poses (B, 1, 3) and points (K, 2) give (B, K, 2).
+    """
+    pose = _check_poses(pose)
+    p = np.asarray(points, dtype=np.float64)
+    c, s = np.cos(pose[..., 2]), np.sin(pose[..., 2])  # (...,)
+    return np.stack([p[..., 0] * c - p[..., 1] * s + pose[..., 0],
+                     p[..., 0] * s + p[..., 1] * c + pose[..., 1]], axis=-1)  # (..., 2)
+
+
+def world_to_local(points: np.ndarray, pose) -> np.ndarray:
+    """World points (..., 2) -> body-local (..., 2) for poses (..., 3), broadcasting: the inverse of
+    :func:`local_to_world`, ``R(-angle) (point - (x, y))``."""
+    pose = _check_poses(pose)
+    d = np.asarray(points, dtype=np.float64) - pose[..., :2]  # (..., 2)
+    c, s = np.cos(pose[..., 2]), np.sin(pose[..., 2])  # (...,)
+    return np.stack([d[..., 0] * c + d[..., 1] * s, -d[..., 0] * s + d[..., 1] * c], axis=-1)  # (..., 2)
 
 
 def block_polygons(pose) -> list[np.ndarray]:

@@ -2,9 +2,9 @@
 
     closed_loop.py  rollout (B envs in lock-step, any executor), evaluate (any policy on any task), TaskAdapter
     result.py    EvalResult, held-out seeds (100000 + i), the demonstration-seed overlap check
-    pusht.py     PushTAdapter, evaluate_pusht (Diffusion Policy's mean-of-max protocol)
-    aloha.py     ArmPairAdapter, evaluate_aloha (ACT's stage rates + strict final-state success)
-    tasks.py     TASKS, make_adapter(task, policy), task_of(policy, dataset_meta)
+    tasks.py     RecordAdapter (any task, from its record in coursekit.tasks), make_adapter, task_of
+    pusht.py     evaluate_pusht (Diffusion Policy's mean-of-max protocol)
+    aloha.py     evaluate_aloha (ACT's stage rates + strict final-state success)
     behaviour.py stalled_steps / still_steps (PushT hesitation), jerk / rms_jerk / smoothness (of executed actions)
     latency.py   chunk_latency_ms (ms per chunk on this CPU), latency_delay (the delay d it means at a task's rate)
 
@@ -24,14 +24,11 @@ _LAZY = {
     "rollout": "coursekit.evaluate.closed_loop:rollout",
     "evaluate": "coursekit.evaluate.closed_loop:evaluate",
     "TaskAdapter": "coursekit.evaluate.closed_loop",
-    "PushTAdapter": "coursekit.evaluate.pusht",
     "evaluate_pusht": "coursekit.evaluate.pusht",
-    "ArmPairAdapter": "coursekit.evaluate.aloha",
     "evaluate_aloha": "coursekit.evaluate.aloha",
-    "ALOHA_TASKS": "coursekit.evaluate.aloha",
-    "STATE_COLUMNS": "coursekit.evaluate.aloha",
-    "TASKS": "coursekit.evaluate.tasks",
+    "RecordAdapter": "coursekit.evaluate.tasks",
     "make_adapter": "coursekit.evaluate.tasks",
+    "task_of": "coursekit.evaluate.tasks",
     "stalled_steps": "coursekit.evaluate.behaviour",
     "still_steps": "coursekit.evaluate.behaviour",
     "jerk": "coursekit.evaluate.behaviour",

@@ -71,9 +71,7 @@ def still_steps(states: np.ndarray, length: np.ndarray, first: int | None = None
 
 def _pusher_in_block_frame(states: np.ndarray) -> np.ndarray:
     """Pusher centre (N, T, 2) in the T's body frame of the same row."""
-    d = states[..., :2] - states[..., 2:4]  # (N, T, 2)
-    c, s = np.cos(states[..., 4]), np.sin(states[..., 4])
-    return np.stack([d[..., 0] * c + d[..., 1] * s, -d[..., 0] * s + d[..., 1] * c], axis=-1)
+    return geo.world_to_local(states[..., :2], states[..., 2:5])  # (N, T, 2)
 
 
 def jerk(actions: np.ndarray) -> np.ndarray:

@@ -3,9 +3,9 @@
 :func:`rollout` is policy- and task-agnostic: B environments step together, an executor
 (receding horizon, temporal ensembling, or a student's class) turns chunks into actions, and
 finished episodes are frozen while the others go on. :func:`evaluate` runs a policy through it
-on one task, described by a :class:`TaskAdapter` (``coursekit.evaluate.pusht``,
-``coursekit.evaluate.aloha``): how to build the env, read observations as policy inputs,
-record a state per step and score an episode. Everything is seeded, so a run is reproducible.
+on one task, described by a :class:`TaskAdapter` (``coursekit.evaluate.tasks.RecordAdapter`` reads
+it off the task's record in ``coursekit.tasks``): how to build the env, read observations as policy
+inputs, record a state per step and score an episode. Everything is seeded, so a run is reproducible.
 
 Execution under an inference delay (chapter 11) is an executor choice like any other::
 
@@ -14,7 +14,7 @@ Execution under an inference delay (chapter 11) is an executor choice like any o
 (:mod:`coursekit.execution.delay`, :mod:`coursekit.execution.rtc`); real-time chunking also
 gets the policy's guided sampler, bound to the same noise generator as every other chunk.
 
-Adding a task is one adapter class and one entry in ``coursekit.evaluate.tasks.TASKS``.
+Adding a task is one record (``coursekit.tasks.register_task``); evaluation then takes it as it is.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ class TaskAdapter(Protocol):
     task: str
     """Task name: 'pusht', 'transfer_cube', 'insertion'."""
     max_steps: int
-    """Protocol steps per episode (PushT 300, arm pair 400)."""
+    """Protocol steps per episode (the task record's ``max_steps``)."""
     record_always: bool
     """True when :meth:`metrics` needs the recorded states (the arm pair's stages)."""
 
@@ -59,7 +59,7 @@ class TaskAdapter(Protocol):
 
 
 def rollout(predict_chunk: Callable[[Any], Any], make_env: Callable[[], Any], obs_fn: Callable[[list[Any]], Any],
-            seeds: Sequence[int], executor_factory: Callable[[Callable[[Any], Any]], Any], max_steps: int = 300,
+            seeds: Sequence[int], executor_factory: Callable[[Callable[[Any], Any]], Any], max_steps: int,
             progress: bool = True, record: bool = False, state_fn: Callable[[Any], np.ndarray] | None = None,
             desc: str = "eval") -> EvalResult:
     """Run one episode per seed, all environments in lock-step, and collect the outcomes.
@@ -70,7 +70,7 @@ def rollout(predict_chunk: Callable[[Any], Any], make_env: Callable[[], Any], ob
         obs_fn: list of B raw env observations -> the policy's per-step input (B, ...) (array or dict).
         seeds: reset seed of each episode.
         executor_factory: predict_chunk -> executor with ``reset(obs)`` / ``act(obs) -> (B, Da)``.
-        max_steps: step limit per episode.
+        max_steps: step limit per episode (a task's protocol: its record's ``max_steps``).
         record: keep states (via ``state_fn(env)``, default ``env.unwrapped.get_state()``) and actions.
     """
     if len(seeds) == 0:

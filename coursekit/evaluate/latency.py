@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from coursekit.execution.delay import CONTROL_HZ, delay_steps
+from coursekit.execution.delay import delay_steps
 
 
 def chunk_latency_ms(policy: Any, task: str, *, sampling: Mapping[str, Any] | None = None, repeats: int = 5,
@@ -57,7 +57,7 @@ def chunk_latency_ms(policy: Any, task: str, *, sampling: Mapping[str, Any] | No
 
 
 def latency_delay(ms_per_chunk: float, task: str) -> int:
-    """d at the task's control rate (CONTROL_HZ) for a chunk latency in milliseconds."""
-    if task not in CONTROL_HZ:
-        raise ValueError(f"unknown task {task!r}; expected one of {list(CONTROL_HZ)}")
-    return delay_steps(ms_per_chunk / 1000.0, CONTROL_HZ[task])
+    """d at the task's control rate (its record's ``control_hz``) for a chunk latency in milliseconds."""
+    from coursekit.tasks.registry import get_task
+
+    return delay_steps(ms_per_chunk / 1000.0, get_task(task).control_hz)

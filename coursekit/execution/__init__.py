@@ -25,7 +25,6 @@ _LAZY = {
     "TemporalEnsemble": "coursekit.execution.ensembling",
     "ExecutionSpec": "coursekit.execution.spec",
     "check_horizons": "coursekit.execution.spec",
-    "CONTROL_HZ": "coursekit.execution.delay",
     "delay_steps": "coursekit.execution.delay",
     "DelayedExecutor": "coursekit.execution.delay",
     "Synchronous": "coursekit.execution.delay",

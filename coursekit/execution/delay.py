@@ -2,10 +2,10 @@
 
 Every executor of chapters 5 and 8 assumes the policy answers instantly. On a robot it does
 not: a chunk that takes L seconds to compute at a control period of P seconds arrives
-d = ceil(L / P) control steps after it was requested (PushT runs at 10 Hz, the arm pair at
-50 Hz), and the robot must do something in the meantime. This module SIMULATES that delay in
-step time: the chunk requested at step r is computed at once (from the observations up to r)
-but handed to the robot only at step r + d. No threads, no clocks: the outcome depends only on
+d = ceil(L / P) control steps after it was requested (P = 1 / a task's ``control_hz`` in
+``coursekit.tasks``: PushT 10 Hz, the arm pair 50 Hz), and the robot must do something in the
+meantime. This module SIMULATES that delay in step time: the chunk requested at step r is
+computed at once (from the observations up to r) but handed to the robot only at step r + d. No threads, no clocks: the outcome depends only on
 the seeds, so it is a measurement, not a race.
 
 Glossary: To = n_obs_steps, Tp = horizon (ACT: k), Ta = n_action_steps, d = delay. A chunk
@@ -46,12 +46,10 @@ import numpy as np
 
 from coursekit.execution.receding import batch_size_of, stack_history, to_numpy
 
-CONTROL_HZ = {"pusht": 10.0, "transfer_cube": 50.0, "insertion": 50.0}
-"""Control rate of each task in Hz (PushT 10 Hz; the arm pair 50 Hz, as in ALOHA)."""
-
-
 def delay_steps(latency_s: float, control_hz: float) -> int:
     """d = ceil(latency / control period): control steps that pass while one chunk is computed.
+
+    ``control_hz`` is the task's rate (``coursekit.tasks.get_task(name).control_hz``).
 
     A latency of exactly k periods gives d = k (the chunk is ready at the k-th tick); a
     tolerance of 1e-9 periods keeps float noise (0.3 s at 10 Hz = 2.9999...) from adding a step.

@@ -40,9 +40,8 @@ from coursekit.data import EpisodeDataset
 from coursekit.envs.aloha.env import AlohaEnv
 from coursekit.envs.aloha.model import STATE_NAMES
 from coursekit.experts.aloha_waypoints import EndEffectorScene, Waypoint, interpolate, quat_axis_angle, quat_mul
-
-EPISODE_STEPS = 400
-"""Control steps per scripted episode (8 s at 50 Hz)."""
+from coursekit.tasks.aloha import EPISODE_STEPS, INSERTION, TRANSFER_CUBE
+from coursekit.tasks.registry import get_task
 
 _YAW_PI = quat_axis_angle((0, 0, 1), 180.0)  # the right arm's base orientation
 
@@ -198,7 +197,7 @@ def run_end_effector(task: str, env_state: np.ndarray, plan_fn, cfg: ScriptConfi
     qpos = [scene.qpos14()]
     grip, stage, err = [], [], []
     for t in range(EPISODE_STEPS):
-        if task == "insertion" and t == INSERTION_REPLAN_STEP and cfg.measure_grasp:
+        if task == INSERTION.name and t == INSERTION_REPLAN_STEP and cfg.measure_grasp:
             left, right = plan_fn(env_state, start, cfg, held=scene.held_offsets(("socket", "peg")))
         lc, rc = interpolate(left, t + 1), interpolate(right, t + 1)  # aim at the next step's pose
         scene.step(lc, rc)
@@ -242,10 +241,8 @@ def replay(env: AlohaEnv, env_state: np.ndarray, actions: np.ndarray) -> dict[st
 
 
 # ---- demonstrations ------------------------------------------------------------------------
-PLANS = {"transfer_cube": transfer_cube_plan, "insertion": insertion_plan}
+PLANS = {TRANSFER_CUBE.name: transfer_cube_plan, INSERTION.name: insertion_plan}
 """Task name -> waypoint planner."""
-ENV_IDS = {"transfer_cube": "coursekit/AlohaTransferCube-v0", "insertion": "coursekit/AlohaInsertion-v0"}
-"""Task name -> gymnasium id of the joint-space environment."""
 
 
 def scripted_episode(task: str, seed: int, cfg: ScriptConfig = ScriptConfig(), env: AlohaEnv | None = None,
@@ -321,19 +318,19 @@ def collect(task: str, n_episodes: int, seed: int = 0, progress: bool = True, cf
         bar.close()
     attempts = next_seed - seed
     meta = {
-        "env_id": ENV_IDS[task], "task": task, "obs_type": "state", "expert": "aloha_scripted (mocap waypoints, joint replay)",
+        "env_id": get_task(task).gym_id, "task": task, "obs_type": "state", "expert": "aloha_scripted (mocap waypoints, joint replay)",
         "seed": seed, "n_episodes": n_episodes, "attempts": attempts, "episode_seeds": kept_seeds,
         "failed_seeds": failed_seeds, "strict_successes": len(kept), "lenient_successes": lenient,
-        "state_names": list(STATE_NAMES), "control_hz": 50, "script_config": asdict(cfg),
+        "state_names": list(STATE_NAMES), "control_hz": get_task(task).control_hz, "script_config": asdict(cfg),
     }
     return EpisodeDataset.from_episodes(kept, meta)
 
 
 def collect_transfer_cube(n_episodes: int, seed: int = 0, progress: bool = True) -> EpisodeDataset:
     """Scripted transfer-cube demonstrations (``coursekit collect aloha-cube``)."""
-    return collect("transfer_cube", n_episodes, seed, progress)
+    return collect(TRANSFER_CUBE.name, n_episodes, seed, progress)
 
 
 def collect_insertion(n_episodes: int, seed: int = 0, progress: bool = True) -> EpisodeDataset:
     """Scripted insertion demonstrations (``coursekit collect aloha-insertion``)."""
-    return collect("insertion", n_episodes, seed, progress)
+    return collect(INSERTION.name, n_episodes, seed, progress)

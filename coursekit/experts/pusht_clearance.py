@@ -6,13 +6,11 @@ there the T never moves, it is the union of two axis-aligned boxes (crossbar and
 p touches the T exactly when ``point_distance(p) <= r``; a straight move from a to b keeps
 clear of the T when ``segment_distance(a, b) > r``.
 
-Every function takes points in the T's body-local frame (``world_to_local`` converts) and is
-vectorised over leading dimensions.
+Every function takes points in the T's body-local frame (``pusht_geometry.world_to_local``
+converts) and is vectorised over leading dimensions.
 """
 
 from __future__ import annotations
-
-import math
 
 import numpy as np
 
@@ -23,24 +21,6 @@ def _boxes() -> tuple[np.ndarray, np.ndarray]:
     """(2, 2) lower and (2, 2) upper corners of the crossbar and stem boxes (local frame)."""
     boxes = np.stack([geo.CROSSBAR_LOCAL, geo.STEM_LOCAL])  # (2, 4, 2)
     return boxes.min(axis=1), boxes.max(axis=1)
-
-
-def world_to_local(points: np.ndarray, pose) -> np.ndarray:
-    """World points (..., 2) -> the T's body-local frame (..., 2) for pose (x, y, angle)."""
-    x, y, a = (float(v) for v in pose)
-    c, s = math.cos(a), math.sin(a)
-    d = np.asarray(points, dtype=np.float64) - (x, y)
-    # Inverse rotation R(-a) applied to row vectors: [dx c + dy s, -dx s + dy c].
-    return np.stack([d[..., 0] * c + d[..., 1] * s, -d[..., 0] * s + d[..., 1] * c], axis=-1)
-
-
-def local_to_world(points: np.ndarray, pose) -> np.ndarray:
-    """Body-local points (..., 2) -> world (..., 2); the vectorised twin of
-    ``pusht_geometry.local_to_world``."""
-    x, y, a = (float(v) for v in pose)
-    c, s = math.cos(a), math.sin(a)
-    p = np.asarray(points, dtype=np.float64)
-    return np.stack([p[..., 0] * c - p[..., 1] * s + x, p[..., 0] * s + p[..., 1] * c + y], axis=-1)
 
 
 def point_distance(points: np.ndarray) -> np.ndarray:

@@ -4,13 +4,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from coursekit.tasks.pusht import PUSHT
+
 
 @dataclass
 class ExpertConfig:
     """Settings of the scripted PushT expert (pixels are world units, steps are 10 Hz env steps)."""
 
-    max_steps: int = 300
-    """Give up after this many env steps (the reference evaluation episode length)."""
+    max_steps: int = PUSHT.max_steps
+    """Give up after this many env steps (default: the evaluation protocol's episode length)."""
     travel_speed: float = 35.0
     """Speed limit of the pusher's target while travelling (px per step)."""
     travel_accel: float = 12.0

@@ -35,12 +35,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from coursekit.envs import pusht_geometry as geo
-from coursekit.experts.pusht_clearance import local_to_world, point_distance, world_to_local
+from coursekit.envs.pusht_geometry import local_to_world, world_to_local
+from coursekit.experts.pusht_clearance import point_distance
 from coursekit.experts.pusht_config import ExpertConfig
 from coursekit.experts.pusht_person import PersonStyle, StyleDraws
 from coursekit.experts.pusht_recording import PHASE_NAMES, PUSH, REST, SETTLE, TRAVEL, EpisodeRecord, Recorder
 from coursekit.experts.pusht_push_search import Push, PushSearch
 from coursekit.experts.pusht_routes import ANTICLOCKWISE, CLOCKWISE, STRAIGHT, speed_profile_targets
+from coursekit.tasks.pusht import PUSHT
 
 if TYPE_CHECKING:
     from coursekit.data import EpisodeDataset
@@ -355,7 +357,7 @@ def collect_dataset(n_episodes: int, seed: int, progress: bool = True, config: E
         raise RuntimeError(f"the expert solved only {len(episodes)} of {max_attempts} resets from seed {seed}; "
                            f"failed seeds: {failed[:20]}")
     meta = {
-        "env_id": "coursekit/PushT-v0", "obs_type": "state",
+        "env_id": PUSHT.gym_id, "obs_type": "state",
         "expert": EXPERT_NAME, "expert_version": EXPERT_VERSION,
         "expert_config": asdict(expert.config),
         "expert_style": None if style is None else asdict(style),

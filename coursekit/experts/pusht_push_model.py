@@ -39,11 +39,7 @@ _COG = np.asarray(geo.T_COG_LOCAL, dtype=np.float64)  # (2,) centre of gravity, 
 def keypoints(poses: np.ndarray) -> np.ndarray:
     """The T's 8 corners (..., 8, 2) in world coordinates for poses (..., 3) = (x, y, angle)."""
     poses = np.asarray(poses, dtype=np.float64)
-    c, s = np.cos(poses[..., 2:3]), np.sin(poses[..., 2:3])  # (..., 1)
-    kx, ky = geo.KEYPOINTS_LOCAL[:, 0], geo.KEYPOINTS_LOCAL[:, 1]  # (8,)
-    wx = kx * c - ky * s + poses[..., 0:1]  # (..., 8)
-    wy = kx * s + ky * c + poses[..., 1:2]
-    return np.stack([wx, wy], axis=-1)  # (..., 8, 2)
+    return geo.local_to_world(geo.KEYPOINTS_LOCAL, poses[..., None, :])  # (..., 8, 2)
 
 
 def pose_error(poses: np.ndarray, goal_pose=geo.GOAL_POSE) -> np.ndarray:

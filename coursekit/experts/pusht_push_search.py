@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from coursekit.envs import pusht_geometry as geo
-from coursekit.experts.pusht_clearance import local_to_world, world_to_local
+from coursekit.envs.pusht_geometry import local_to_world, world_to_local
 from coursekit.experts.pusht_config import ExpertConfig
 from coursekit.experts.pusht_person import Picker
 from coursekit.experts.pusht_push_model import candidate_contacts, pose_error, predict_pushes

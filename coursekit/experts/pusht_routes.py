@@ -20,7 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from coursekit.envs import pusht_geometry as geo
-from coursekit.experts.pusht_clearance import local_to_world, point_distance, segment_distance
+from coursekit.envs.pusht_geometry import local_to_world
+from coursekit.experts.pusht_clearance import point_distance, segment_distance
 from coursekit.experts.pusht_push_model import outline_corners
 
 CLOCKWISE, ANTICLOCKWISE, STRAIGHT = "cw", "ccw", "straight"

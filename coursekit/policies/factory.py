@@ -37,7 +37,7 @@ def make_policy(policy_type: str, dataset: Any, *, features: str | None = None, 
     Args:
         policy_type: a key of ``POLICY_TYPES`` ('diffusion', 'regression', 'act', ...).
         dataset: an :class:`~coursekit.data.EpisodeDataset` with "action" and the arrays ``features`` reads.
-        features: a key of ``FEATURES`` (default: 'pusht_state' for PushT data, 'aloha_state' for the arm pair).
+        features: a key of ``FEATURES`` (default: the default features of the data's task, ``coursekit.tasks``).
         recipe: a key of the class's ``recipes`` ("paper" or "cpu"); sets the batch size unless given.
         batch_size, seed, device: of the batcher (``seed`` also seeds the weight initialisation).
         config: further config fields (n_action_steps=..., unet=UNet1DConfig(...), chunk_size=...,
@@ -53,7 +53,7 @@ def make_policy(policy_type: str, dataset: Any, *, features: str | None = None, 
     if batch_size is not None:
         train_fields["batch_size"] = int(batch_size)
     device = resolve_device(device)
-    features = features or default_features(dataset.arrays)
+    features = features or default_features(dataset.arrays, dataset.meta)
     spec = get_features(features)
     low = spec(dataset.arrays)  # (N, Do): the low-dim part (image features: agent_pos)
     cfg = cls.make_config(features=features, obs_type=spec.obs_type, obs_dim=int(low.shape[-1]),

@@ -18,6 +18,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Polygon
 
 from coursekit.envs import pusht_geometry as geo
+from coursekit.tasks.pusht import PUSHT
 from coursekit.viz.pusht_plots import BLOCK_EDGE, draw_scene
 
 SIDE_COLORS = {"cw": "tab:orange", "ccw": "tab:purple", None: "tab:gray"}
@@ -80,7 +81,7 @@ def plot_two_ways(start_state: Sequence[float] | None = None, coin_seeds: Iterab
     ax_paths.legend(fontsize=8, loc="upper right")
     ax_cov.axhline(0.95, color="k", ls="--", lw=0.8)
     ax_cov.text(0, 0.955, "success (0.95)", fontsize=7, va="bottom")
-    ax_cov.set_xlabel("env step (10 Hz)")
+    ax_cov.set_xlabel(f"env step ({PUSHT.control_hz:g} Hz)")
     ax_cov.set_ylabel("coverage of the goal T")
     ax_cov.set_ylim(0, 1.02)
     ax_cov.set_title("same start, the coin decides the way round", fontsize=9)

@@ -26,6 +26,7 @@ from meshcat.animation import Animation
 
 from coursekit.envs import pusht_geometry as geo
 from coursekit.envs.pusht_render import AGENT_COLOR, BLOCK_COLOR, BLOCK_OUTLINE, GOAL_COLOR, TARGET_COLOR, WALL_COLOR
+from coursekit.tasks.pusht import PUSHT
 from coursekit.viz.meshcat_scene import MeshcatScene, pose_matrix, shared_scene, translation
 
 UNIT = 1.0 / geo.WORLD_SIZE
@@ -187,14 +188,14 @@ class PushTMeshcat:
         if action is not None:
             self.scene.vis[ROOT]["target"].set_property("visible", True)
 
-    def animate(self, states, actions=None, fps: float = 10.0, play: bool = True, repetitions: int = 1) -> Animation:
+    def animate(self, states, actions=None, fps: float = PUSHT.control_hz, play: bool = True, repetitions: int = 1) -> Animation:
         """Record a rollout as a meshcat animation (one keyframe per step) and load it in the scene.
 
         Args:
             states: (T, 5) or (T, 7) [agent_x, agent_y, block_x, block_y, block_angle, ...] in
                 PushT units (a dataset episode's "state" or stacked ``env.get_state()``).
             actions: optional (T, 2) commanded pusher targets, drawn as a crimson disc.
-            fps: playback rate; PushT's control rate is 10 Hz.
+            fps: playback rate (default: PushT's control rate, ``PUSHT.control_hz``).
             play: start playing when the page opens (False: the page shows the first step).
             repetitions: how many times the animation plays.
 
@@ -230,7 +231,7 @@ class PushTMeshcat:
         return self.scene.save_html(path)
 
 
-def export_pusht_rollout(states, path: str | os.PathLike, actions=None, fps: float = 10.0, play: bool = True,
+def export_pusht_rollout(states, path: str | os.PathLike, actions=None, fps: float = PUSHT.control_hz, play: bool = True,
                          scene: MeshcatScene | None = None) -> Path:
     """One call: draw PushT, record ``states`` (T, 5|7) (and ``actions`` (T, 2)) and write the HTML."""
     viewer = PushTMeshcat(scene, show_target=actions is not None)

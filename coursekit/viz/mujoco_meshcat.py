@@ -45,6 +45,7 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 from meshcat.animation import Animation, AnimationClip, AnimationTrack  # noqa: E402
 
+from coursekit.tasks.aloha import CONTROL_HZ  # noqa: E402
 from coursekit.viz.meshcat_scene import MeshcatScene, pose_matrix, rgb_hex, shared_scene, translation  # noqa: E402
 
 _T = mujoco.mjtGeom
@@ -274,7 +275,7 @@ class MujocoMeshcat:
             xpos[t], xmat[t] = data.geom_xpos, data.geom_xmat
         return xpos, xmat
 
-    def animate(self, geom_xpos, geom_xmat, fps: float = 50.0, play: bool = True, repetitions: int = 1) -> Animation:
+    def animate(self, geom_xpos, geom_xmat, fps: float = CONTROL_HZ, play: bool = True, repetitions: int = 1) -> Animation:
         """Record a rollout from per-step geom poses and load it in the scene as an animation.
 
         Args:
@@ -323,7 +324,7 @@ class MujocoMeshcat:
         self.scene.vis.set_animation(anim, play=play, repetitions=repetitions)
         return anim
 
-    def animate_qpos(self, qpos, fps: float = 50.0, play: bool = True, repetitions: int = 1) -> Animation:
+    def animate_qpos(self, qpos, fps: float = CONTROL_HZ, play: bool = True, repetitions: int = 1) -> Animation:
         """Record a rollout from joint positions qpos (T, nq) (forward kinematics per step)."""
         xpos, xmat = self.poses_from_qpos(qpos)
         return self.animate(xpos, xmat, fps=fps, play=play, repetitions=repetitions)
@@ -338,7 +339,7 @@ class MujocoMeshcat:
         return self.scene.save_html(path)
 
 
-def export_mujoco_rollout(model: mujoco.MjModel, qpos, path: str | os.PathLike, fps: float = 50.0, play: bool = True,
+def export_mujoco_rollout(model: mujoco.MjModel, qpos, path: str | os.PathLike, fps: float = CONTROL_HZ, play: bool = True,
                           scene: MeshcatScene | None = None) -> Path:
     """One call: draw ``model``, record the joint trajectory ``qpos`` (T, nq) and write the HTML."""
     viewer = MujocoMeshcat(model, scene)

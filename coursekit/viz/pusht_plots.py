@@ -22,6 +22,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Circle, Polygon, Rectangle
 
 from coursekit.envs import pusht_geometry as geo
+from coursekit.tasks.pusht import PUSHT
 
 # The reference colours (same names as the rasteriser), as matplotlib colour strings.
 GOAL_COLOR = "lightgreen"
@@ -126,7 +127,7 @@ def animate_rollout(states, actions=None, coverage=None, stride: int = 1, interv
     """A ``FuncAnimation`` of a rollout: states (T, >=5), optional actions (T, 2) drawn as the
     target cross, optional coverage (T,) in the title. ``stride`` keeps every k-th frame.
 
-    Default frame interval = real time (100 ms per env step, times ``stride``).
+    Default frame interval = real time (1 / ``PUSHT.control_hz`` per env step, times ``stride``).
     """
     s = _states(states)
     if stride < 1:
@@ -155,7 +156,7 @@ def animate_rollout(states, actions=None, coverage=None, stride: int = 1, interv
         title.set_text(text)
         return changed + [title]
 
-    interval = interval_ms if interval_ms is not None else 100 * stride
+    interval = interval_ms if interval_ms is not None else round(1000 * stride / PUSHT.control_hz)
     return FuncAnimation(fig, frame, frames=frames, interval=interval, blit=False)
 
 
@@ -190,7 +191,7 @@ def plot_coverage(coverages, labels: Sequence[str] | None = None, ax: Axes | Non
     for i, c in enumerate(curves):
         ax.plot(np.arange(len(c)), c, lw=1.5, label=None if labels is None else labels[i])
     ax.axhline(geo.SUCCESS_THRESHOLD, color="k", ls="--", lw=1, label="success (0.95)")
-    ax.set_xlabel("env step (10 Hz)")
+    ax.set_xlabel(f"env step ({PUSHT.control_hz:g} Hz)")
     ax.set_ylabel("coverage of the goal T")
     ax.set_ylim(0, 1.02)
     ax.legend(fontsize=7, loc="lower right")

@@ -14,7 +14,9 @@
   own renderer (:class:`coursekit.envs.pusht_render.PushTRenderer`, the arm pair's offscreen
   MuJoCo camera), each row captioned with seed, score and success.
 
-States are what a rollout records (see ``coursekit.evaluate``'s ``record``):
+What is drawn, and from which states, is the task's record's ``replay`` (``coursekit.tasks``): its
+viewer (:mod:`coursekit.viz.replay_viewers`), the frame size and the playback rate (the task's
+control rate). States are what a rollout records (``RecordAdapter.replay_states``):
 
     pusht                      (T + 1, 5) [agent x, agent y, block x, block y, block angle]
                                or (T + 1, 7) as ``PushTEnv.get_state()`` gives (+ agent vx, vy; ignored)
@@ -33,32 +35,24 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+from coursekit.tasks.record import Task
+from coursekit.tasks.registry import get_task
+from coursekit.viz.replay_viewers import viewer_for
 
 if TYPE_CHECKING:
     from coursekit.output_lock import OutputLock
     from coursekit.viz.meshcat_scene import MeshcatScene
 
-PUSHT = "pusht"
-"""Task name of PushT."""
-ARM_PAIR_TASKS = ("transfer_cube", "insertion")
-"""Task names of the arm pair (the keys of ``coursekit.envs.aloha.tasks.TASKS``)."""
-TASKS = (PUSHT, *ARM_PAIR_TASKS)
-"""Every task :func:`write_replay` draws."""
-CONTROL_HZ = {PUSHT: 10.0, "transfer_cube": 50.0, "insertion": 50.0}
-"""Default playback rate per task: its control rate (PushT 10 Hz, the arm pair 50 Hz)."""
 HOLD_S = 1.0
 """Seconds the replay holds each episode's final state before the next one starts."""
 MAX_EPISODES = 24
 """Most episodes in one replay (an arm-pair episode adds about 2 MB to the page)."""
 REPLAY_NAME, FRAMES_NAME = "replay.html", "frames.png"
 """File names written in ``out_dir``."""
-ARM_CAMERA = "angle"
-"""The arm pair's camera for frames.png (an oblique view shows grippers and objects best)."""
-PANEL_HW = {PUSHT: (256, 256), "transfer_cube": (240, 320), "insertion": (240, 320)}
-"""(H, W) pixels of one frame in frames.png."""
 MARGIN, GAP, CAPTION_H, HEADER_H = 10, 8, 26, 24
 """frames.png layout in pixels: outer margin, gap between panels, row caption band, column-title band."""
 
@@ -115,14 +109,8 @@ class EpisodeRecording:
 
 
 # -- validation ------------------------------------------------------------------------------------
-def _arm_model(task: str):
-    from coursekit.envs.aloha import load_model
-
-    return load_model(task)
-
-
-def _check_episodes(task: str, episodes: Sequence[EpisodeRecording], nq: int | None) -> list[EpisodeRecording]:
-    """The episodes as a list, each checked against the task's state layout."""
+def _check_episodes(viewer: Any, episodes: Sequence[EpisodeRecording]) -> list[EpisodeRecording]:
+    """The episodes as a list, each checked against the task's state layout (by its viewer)."""
     if isinstance(episodes, EpisodeRecording):
         raise ValueError("episodes must be a sequence of EpisodeRecording; got one EpisodeRecording (wrap it in a list)")
     episodes = list(episodes)
@@ -131,17 +119,7 @@ def _check_episodes(task: str, episodes: Sequence[EpisodeRecording], nq: int | N
     for i, ep in enumerate(episodes):
         if not isinstance(ep, EpisodeRecording):
             raise ValueError(f"episodes[{i}] must be an EpisodeRecording, got {type(ep).__name__}")
-        width = ep.states.shape[1]
-        if task == PUSHT and width not in (5, 7):
-            raise ValueError(f"episodes[{i}] (seed {ep.seed}): PushT states must have shape (T + 1, 5) [ax, ay, bx, "
-                             f"by, angle] or (T + 1, 7) (PushTEnv.get_state()), got {ep.states.shape}")
-        if task != PUSHT and width != nq:
-            hint = ""
-            if width == 16 + nq:
-                hint = (" (this looks like evaluate_aloha's recorded row [stage, strict_success, qpos (14), "
-                        "physics_qpos]: pass states[:, 16:])")
-            raise ValueError(f"episodes[{i}] (seed {ep.seed}): {task} states must be MuJoCo qpos of shape "
-                             f"(T + 1, {nq}), got {ep.states.shape}{hint}")
+        viewer.check(i, ep.seed, ep.states)
     return episodes
 
 
@@ -213,9 +191,8 @@ def _caption_overlay(task: str, episodes: list[EpisodeRecording], starts_s: list
 """
 
 
-def replay_html(task: str, episodes: list[EpisodeRecording], fps: float, scene: MeshcatScene | None = None,
-                model=None) -> str:
-    """The replay page as a string (see the module docstring); ``model``: the arm pair's MjModel."""
+def replay_html(viewer: Any, episodes: list[EpisodeRecording], fps: float, scene: MeshcatScene | None = None) -> str:
+    """The replay page as a string (see the module docstring), drawn by the task's ``viewer``."""
     from coursekit.viz.meshcat_scene import MeshcatScene
 
     starts, hold = timeline([len(ep.states) for ep in episodes], fps)
@@ -223,19 +200,12 @@ def replay_html(task: str, episodes: list[EpisodeRecording], fps: float, scene: 
     own = scene is None
     scene = MeshcatScene() if own else scene
     try:
-        if task == PUSHT:
-            from coursekit.viz.meshcat_pusht import PushTMeshcat
-
-            PushTMeshcat(scene, show_target=False).animate(states[:, :5], fps=fps, play=True)
-        else:
-            from coursekit.viz.mujoco_meshcat import MujocoMeshcat
-
-            MujocoMeshcat(_arm_model(task) if model is None else model, scene).animate_qpos(states, fps=fps, play=True)
+        viewer.animate(scene, states, fps)
         page = scene.static_html()
     finally:
         if own:
             scene.close()
-    overlay = _caption_overlay(task, episodes, [float(s) / fps for s in starts])
+    overlay = _caption_overlay(viewer.task.name, episodes, [float(s) / fps for s in starts])
     cut = page.rfind("</body>")
     if cut < 0:
         raise RuntimeError("meshcat's static HTML has no </body>: cannot add the caption box")
@@ -243,41 +213,25 @@ def replay_html(task: str, episodes: list[EpisodeRecording], fps: float, scene: 
 
 
 # -- the first/last frame grid -------------------------------------------------------------------------
-def _render_frames(task: str, episodes: list[EpisodeRecording]) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(first, last) (H, W, 3) uint8 images of each episode, by the task's own renderer."""
-    h, w = PANEL_HW[task]
-    if task == PUSHT:
-        from coursekit.envs.pusht_render import PushTRenderer
-
-        renderer = PushTRenderer((h, w))
-        return [(renderer.render(ep.states[0, :5]), renderer.render(ep.states[-1, :5])) for ep in episodes]
-    from coursekit.envs.aloha import AlohaEnv
-
-    env = AlohaEnv(task)
-    try:
-        out = []
-        for ep in episodes:
-            pair = []
-            for q in (ep.states[0], ep.states[-1]):
-                env.set_physics_state(q)
-                pair.append(env.render_camera(ARM_CAMERA, (h, w)).copy())
-            out.append((pair[0], pair[1]))
-        return out
-    finally:
-        env.close()
+def _panel_hw(task: Task | str) -> tuple[int, int]:
+    record = task if isinstance(task, Task) else get_task(task)
+    if record.replay is None:
+        raise ValueError(f"task {record.name!r} has no replay drawing (its record's replay is None)")
+    return record.replay.panel_hw
 
 
-def panel_origin(row: int, col: int, task: str) -> tuple[int, int]:
+def panel_origin(row: int, col: int, task: Task | str) -> tuple[int, int]:
     """(y, x) pixel of the top-left corner of frame ``col`` (0 first, 1 last) of row ``row`` in frames.png."""
-    h, w = PANEL_HW[task]
+    h, w = _panel_hw(task)
     return MARGIN + HEADER_H + row * (CAPTION_H + h + GAP) + CAPTION_H, MARGIN + col * (w + GAP)
 
 
-def frames_grid(task: str, episodes: list[EpisodeRecording]) -> np.ndarray:
-    """The frames.png picture (H, W, 3) uint8: one row per episode, first and last frame, captioned."""
+def frames_grid(viewer: Any, episodes: list[EpisodeRecording]) -> np.ndarray:
+    """The frames.png picture (H, W, 3) uint8: one row per episode, first and last frame (by ``viewer``), captioned."""
     from PIL import Image, ImageDraw, ImageFont
 
-    h, w = PANEL_HW[task]
+    task = viewer.task
+    h, w = viewer.panel_hw
     n = len(episodes)
     width = 2 * MARGIN + 2 * w + GAP
     height = 2 * MARGIN + HEADER_H + n * (CAPTION_H + h + GAP) - GAP
@@ -286,7 +240,7 @@ def frames_grid(task: str, episodes: list[EpisodeRecording]) -> np.ndarray:
     font = ImageFont.load_default(size=14)
     draw.text((MARGIN, MARGIN + 2), "first frame", fill=(60, 60, 60), font=font)
     draw.text((MARGIN + w + GAP, MARGIN + 2), "last frame", fill=(60, 60, 60), font=font)
-    for r, (ep, frames) in enumerate(zip(episodes, _render_frames(task, episodes))):
+    for r, (ep, frames) in enumerate(zip(episodes, viewer.frames([e.states for e in episodes]))):
         y0, _ = panel_origin(r, 0, task)
         colour = (20, 120, 50) if ep.success else (180, 30, 30)
         steps = len(ep.states) - 1
@@ -306,7 +260,7 @@ def _png_bytes(image: np.ndarray) -> bytes:
 
 
 # -- the one call ----------------------------------------------------------------------------------------
-def write_replay(out_dir: str | os.PathLike, task: str, episodes: Sequence[EpisodeRecording], *,
+def write_replay(out_dir: str | os.PathLike, task: Task | str, episodes: Sequence[EpisodeRecording], *,
                  fps: float | None = None, overwrite: bool = False,
                  scene: MeshcatScene | None = None, lock: OutputLock | None = None) -> dict[str, Path]:
     """Write ``replay.html`` and ``frames.png`` for ``episodes`` of ``task`` into ``out_dir``.
@@ -314,9 +268,9 @@ def write_replay(out_dir: str | os.PathLike, task: str, episodes: Sequence[Episo
     Args:
         out_dir: folder for the two files (created if missing). Files already there with those
             names are refused (FileExistsError naming them) unless ``overwrite``.
-        task: "pusht", "transfer_cube" or "insertion".
+        task: a task name ("pusht", "transfer_cube", "insertion", ...) or record whose ``replay`` says how to draw it.
         episodes: 1 to :data:`MAX_EPISODES` recordings, played in this order.
-        fps: playback rate of the HTML (default: the task's control rate, :data:`CONTROL_HZ`).
+        fps: playback rate of the HTML (default: the task's control rate, its record's ``control_hz``).
         overwrite: replace existing ``replay.html`` / ``frames.png``.
         scene: a :class:`MeshcatScene` to draw in (cleared); default: a private one, closed after.
         lock: the caller's lock on ``out_dir`` (``coursekit eval --record`` holds one), under which
@@ -329,17 +283,19 @@ def write_replay(out_dir: str | os.PathLike, task: str, episodes: Sequence[Episo
     """
     from coursekit.atomic import atomic_write_bytes, atomic_write_text
 
-    if task not in TASKS:
-        raise ValueError(f"unknown task {task!r}; expected one of {list(TASKS)}")
-    fps = CONTROL_HZ[task] if fps is None else fps
+    record = task if isinstance(task, Task) else get_task(task)
+    fps = record.control_hz if fps is None else fps
     if isinstance(fps, bool) or not isinstance(fps, (int, float)) or not (math.isfinite(fps) and fps > 0):
         raise ValueError(f"fps must be a positive finite number, got {fps!r}")
     out_dir = Path(out_dir)
     html_path, png_path = _check_out_dir(out_dir, overwrite)
-    model = _arm_model(task) if task != PUSHT else None
-    episodes = _check_episodes(task, episodes, None if model is None else model.nq)
-    page = replay_html(task, episodes, float(fps), scene=scene, model=model)
-    png = _png_bytes(frames_grid(task, episodes))
+    viewer = viewer_for(record)
+    try:
+        episodes = _check_episodes(viewer, episodes)
+        page = replay_html(viewer, episodes, float(fps), scene=scene)
+        png = _png_bytes(frames_grid(viewer, episodes))
+    finally:
+        viewer.close()
     out_dir.mkdir(parents=True, exist_ok=True)
     _check_out_dir(out_dir, overwrite)  # again: nothing appeared while we drew
     atomic_write_text(html_path, page, lock=lock)

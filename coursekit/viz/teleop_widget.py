@@ -7,7 +7,7 @@ Python, in a real ``PushTEnv``, through :class:`coursekit.teleop.TeleopRecorder`
 recording is exactly what the recorder would produce from the same targets.
 
 Timing: while recording, the page sends one "tick" with the current mouse target every
-1 / 10 s (the env's control rate) and waits for Python's answer before the next one, so the
+1 / ``PUSHT.control_hz`` s (the env's control rate) and waits for Python's answer before the next one, so the
 world never runs ahead of the kernel: each tick is one control step. Ticks begin at the first
 press on the canvas after Start, so no idle steps are recorded while you reach for the mouse.
 
@@ -24,6 +24,7 @@ import traitlets
 
 from coursekit.envs import pusht_geometry as geo
 from coursekit.envs.pusht_render import AGENT_COLOR, BLOCK_COLOR, GOAL_COLOR, TARGET_COLOR
+from coursekit.tasks.pusht import PUSHT
 from coursekit.teleop import TeleopRecorder
 
 _ESM = r"""
@@ -127,7 +128,7 @@ class TeleopWidget(anywidget.AnyWidget):
 
     _esm = _ESM
     size = traitlets.Int(400).tag(sync=True)
-    hz = traitlets.Int(10).tag(sync=True)
+    hz = traitlets.Float(PUSHT.control_hz).tag(sync=True)
     agent = traitlets.List([256.0, 400.0]).tag(sync=True)
     agent_radius = traitlets.Float(geo.AGENT_RADIUS).tag(sync=True)
     block_outline = traitlets.List([]).tag(sync=True)

@@ -6,9 +6,10 @@
 
 Action (14,) float: absolute joint targets for the position servos, in the layout of
 ``coursekit.envs.aloha.model`` ([left 6 joints, left gripper g, right 6 joints, right gripper g]).
-One step = 10 physics steps of 2 ms (50 Hz control). Joint targets outside the joint ranges and
-gripper commands outside [-0.34, 1.0] are CLIPPED to those bounds (the action space's low/high);
-an action of the wrong shape or with NaN/inf raises ValueError.
+One step = 10 physics steps of 2 ms (the arm pair's 50 Hz control, ``coursekit.tasks.aloha.CONTROL_HZ``).
+Joint targets outside the joint ranges and gripper commands outside [-0.34, 1.0] are CLIPPED to
+those bounds (the action space's low/high); an action of the wrong shape or with NaN/inf raises
+ValueError.
 
 Observations (``obs_type``):
     "state"  (default) dict: "qpos" (14,) joint angles + normalised grippers,
@@ -19,7 +20,7 @@ Observations (``obs_type``):
 Reward: the published stage (0-4) of the current state. ``info`` carries "stage", "max_stage",
 "is_success" (lenient, published: max_stage == 4), "strict_success" (the current state is a
 finished task; read it at the last step), "env_state" and "sim_unstable".
-Episodes are truncated after ``max_episode_steps`` (400, 8 s); ``terminated`` is True only when
+Episodes are truncated after ``max_episode_steps`` (default ``EPISODE_STEPS``, 8 s); ``terminated`` is True only when
 the simulation became unstable (NaN state): the physics is then restored to the last good state,
 ``info["sim_unstable"]`` is True, and the episode must be reset.
 """
@@ -46,6 +47,7 @@ from coursekit.envs.aloha.render import CameraRenderer
 from coursekit.envs.aloha.tasks import TASKS, AlohaTask
 from coursekit.envs.checks import check_reset_args, finite_array
 from coursekit.envs.image_size import size_hw
+from coursekit.tasks.aloha import CONTROL_HZ, EPISODE_STEPS, INSERTION, TRANSFER_CUBE
 
 OBS_TYPES = ("state", "pixels")
 
@@ -54,19 +56,19 @@ class AlohaEnv(gymnasium.Env):
     """The arm pair with one task's objects, under joint-position control.
 
     Args:
-        task: "transfer_cube" or "insertion".
+        task: the arm-pair task's name, "transfer_cube" or "insertion" (``coursekit.tasks.aloha``).
         obs_type: "state" or "pixels" (see the module docstring).
         render_mode: None or "rgb_array" (``render()`` returns the ``camera`` image).
         render_size: image size for "pixels" observations and ``render()``: int or (H, W).
         camera: camera used for "pixels" and ``render()``: "top", "angle" or "front_close".
-        max_episode_steps: control steps before truncation (400 = 8 s, as for the scripted data).
+        max_episode_steps: control steps before truncation (default: the protocol's ``EPISODE_STEPS``, 8 s).
     """
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 50}
+    metadata = {"render_modes": ["rgb_array"], "render_fps": CONTROL_HZ}
 
-    def __init__(self, task: str = "transfer_cube", obs_type: str = "state", render_mode: str | None = None,
+    def __init__(self, task: str = TRANSFER_CUBE.name, obs_type: str = "state", render_mode: str | None = None,
                  render_size: int | tuple[int, int] = (240, 320), camera: str = "top",
-                 max_episode_steps: int = 400) -> None:
+                 max_episode_steps: int = EPISODE_STEPS) -> None:
         if task not in TASKS:
             raise ValueError(f"unknown task {task!r}; expected one of {sorted(TASKS)}")
         if obs_type not in OBS_TYPES:
@@ -125,7 +127,7 @@ class AlohaEnv(gymnasium.Env):
         return self._obs(), self._info(unstable=False)
 
     def step(self, action: np.ndarray) -> tuple[dict, float, bool, bool, dict]:
-        """One 50 Hz control step with a (14,) action (absolute joint targets + gripper commands)."""
+        """One control step with a (14,) action (absolute joint targets + gripper commands)."""
         action = finite_array(action, (14,), "action", "[left 6 joints, left g, right 6 joints, right g]")
         action = np.clip(action, self.action_space.low, self.action_space.high)  # documented clip
         self.index.set_action(self.data, action)
@@ -233,11 +235,11 @@ class AlohaTransferCubeEnv(AlohaEnv):
     """Transfer cube (``coursekit/AlohaTransferCube-v0``): right arm picks, left arm receives."""
 
     def __init__(self, **kwargs: Any) -> None:
-        super().__init__(task="transfer_cube", **kwargs)
+        super().__init__(task=TRANSFER_CUBE.name, **kwargs)
 
 
 class AlohaInsertionEnv(AlohaEnv):
     """Insertion (``coursekit/AlohaInsertion-v0``): peg (right arm) into socket (left arm)."""
 
     def __init__(self, **kwargs: Any) -> None:
-        super().__init__(task="insertion", **kwargs)
+        super().__init__(task=INSERTION.name, **kwargs)

@@ -32,6 +32,8 @@ from importlib import resources  # noqa: E402
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
+from coursekit.tasks.aloha import CONTROL_HZ, INSERTION, TRANSFER_CUBE  # noqa: E402
+
 ARMS = ("left", "right")
 """Arm prefixes, in the order of the 14-d layout."""
 ARM_JOINTS = ("waist", "shoulder", "elbow", "forearm_roll", "wrist_angle", "wrist_rotate")
@@ -52,14 +54,14 @@ FINGER_CTRL_RANGE = (0.005, 0.058)
 """Finger command range in metres (the XML ctrlrange); it reaches below the joint limit (0.021)
 so that a close command squeezes whatever is between the pads."""
 
-CONTROL_DT = 0.02
-"""Seconds per control step (50 Hz)."""
+CONTROL_DT = 1.0 / CONTROL_HZ
+"""Seconds per control step: 0.02 at the arm pair's 50 Hz (``coursekit.tasks.aloha.CONTROL_HZ``)."""
 PHYSICS_DT = 0.002
 """Seconds per physics step (the XML timestep)."""
 N_SUBSTEPS = round(CONTROL_DT / PHYSICS_DT)
 """Physics steps per control step (10)."""
 
-TASK_FILES = {"transfer_cube": "transfer_cube.xml", "insertion": "insertion.xml"}
+TASK_FILES = {TRANSFER_CUBE.name: "transfer_cube.xml", INSERTION.name: "insertion.xml"}
 """Task name -> the MJCF file with its objects."""
 
 

@@ -17,6 +17,7 @@ import mujoco
 import numpy as np
 
 from coursekit.envs.aloha.model import ArmPairIndex
+from coursekit.tasks.aloha import INSERTION, TRANSFER_CUBE
 
 _IDENTITY_QUAT = np.array([1.0, 0.0, 0.0, 0.0])
 
@@ -101,7 +102,7 @@ class AlohaTask:
 class TransferCubeTask(AlohaTask):
     """Right arm picks the 4 cm cube and hands it to the left arm."""
 
-    name = "transfer_cube"
+    name = TRANSFER_CUBE.name
     objects = ("cube",)
     spawn_ranges = (((0.0, 0.2), (0.4, 0.6), 0.02),)
     min_height = 0.05
@@ -147,7 +148,7 @@ class TransferCubeTask(AlohaTask):
 class InsertionTask(AlohaTask):
     """Right arm picks the peg, left arm the socket; the peg goes into the socket to the pin."""
 
-    name = "insertion"
+    name = INSERTION.name
     objects = ("peg", "socket")
     spawn_ranges = (((0.1, 0.2), (0.4, 0.6), 0.01), ((-0.2, -0.1), (0.4, 0.6), 0.022))
     peg_half_length = 0.06
@@ -214,5 +215,5 @@ class InsertionTask(AlohaTask):
         return inside and bool(in_tube)
 
 
-TASKS = {"transfer_cube": TransferCubeTask, "insertion": InsertionTask}
-"""Task name -> task class."""
+TASKS = {cls.name: cls for cls in (TransferCubeTask, InsertionTask)}
+"""Task name (``coursekit.tasks``) -> the class that spawns and judges its objects."""
