@@ -19,6 +19,7 @@ Run: ``.venv/bin/python -m benchmarks.check_lerobot_reader`` (needs PyPI once, ~
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
 import subprocess
@@ -32,24 +33,26 @@ import numpy as np
 from benchmarks.results import record
 from coursekit.data.episodes import EpisodeDataset
 from coursekit.data.lerobot_export import export_lerobot, lerobot_frames
+from coursekit.data.lerobot_format import INDEX_KEYS
 
 COMMAND = ".venv/bin/python -m benchmarks.check_lerobot_reader"
 SECTION = "LeRobot interop"
 CACHE = Path.home() / ".cache" / "coursekit" / "lerobot-check"
 PROBE = Path(__file__).with_name("lerobot_reader_probe.py")
 READER_DEPS = ("torch==2.13.0", "torchvision", "av>=15,<16", "datasets>=4,<5", "huggingface-hub>=0.34.2,<0.36",
-               "pandas", "pyarrow", "accelerate", "packaging", "pillow", "numpy", "jsonlines", "draccus==0.10.0",
+               "pandas>=2,<3", "pyarrow", "accelerate", "packaging", "pillow", "numpy", "jsonlines", "draccus==0.10.0",
                "termcolor", "einops")
 """What ``lerobot.datasets.lerobot_dataset`` imports (lerobot itself goes in with --no-deps)."""
 
 
 def reader_venv(version: str) -> Path:
     """The venv's python, built on first use; raises RuntimeError saying which pip step failed."""
-    home = CACHE / f"venv-lerobot-{version}"
+    digest = hashlib.sha256(" ".join(READER_DEPS).encode()).hexdigest()[:8]
+    home = CACHE / f"venv-lerobot-{version}-{digest}"
     python = home / "bin" / "python"
     if (home / "ready").is_file():
         return python
-    venv.create(home, with_pip=True, clear=True)
+    venv.create(home, with_pip=True)  # an interrupted earlier build is completed, not redone
     for step in ([*READER_DEPS], ["--no-deps", f"lerobot=={version}"]):
         res = subprocess.run([str(python), "-m", "pip", "install", "--quiet", *step], capture_output=True, text=True)
         if res.returncode:
@@ -92,6 +95,12 @@ def compare(i: int, name: str, dataset: EpisodeDataset, seen: dict[str, np.ndarr
         exp = values[: len(got)].reshape(got.shape)
         if not (np.array_equal(got, exp.astype(got.dtype)) or (exp.dtype.kind == "f" and np.allclose(got, exp, atol=1e-7, rtol=0))):
             problems.append(f"{name}: {key} differs (max |diff| {np.abs(got - exp).max():.3g})")
+    frames, _ = lerobot_frames(dataset, images=images)
+    if info["tasks"] != list(frames.tasks) or info["fps"] != frames.fps:
+        problems.append(f"{name}: LeRobot reads tasks {info['tasks']} at {info['fps']} fps")
+    cameras = [k for k, f in frames.features.items() if f.dtype == "image"]
+    if info["camera_keys"] != cameras or set(info["stats_keys"]) != {*frames.features, *INDEX_KEYS}:
+        problems.append(f"{name}: LeRobot sees cameras {info['camera_keys']} and statistics of {info['stats_keys']}")
     ends = np.cumsum(dataset.episode_lengths)
     for row, p in enumerate(seen[f"{i}/chunk_picks"]):
         end = int(ends[np.searchsorted(ends, p, side="right")])
@@ -132,7 +141,9 @@ def main(argv: list[str] | None = None) -> int:
             problems = [p for i, (name, ds) in enumerate(data.items())
                         for p in compare(i, name, ds, seen, summary["folders"][i], images=name == "pusht")]
     verdict = "pass" if not problems else "fail"
-    note = (f"lerobot {summary.get('lerobot')} (torch {summary.get('torch', '?')}), LeRobotDataset(root=...) offline on "
+    stubbed = "; torchvision's C++ ops stubbed (CUDA build beside the CPU torch)" if summary.get("torchvision_ops_stubbed") else ""
+    note = (f"lerobot {summary.get('lerobot')} from PyPI, installed --no-deps beside torch {summary.get('torch', '?')}{stubbed}; "
+            f"LeRobotDataset(root=...) offline on "
             f"PushT (3 episodes, images), transfer cube, insertion: every value of 4 batches of 16 and an action chunk "
             f"with episode-end padding equal to the export" + ("" if not problems else "; " + " | ".join(problems)[:600]))
     print(verdict, note)

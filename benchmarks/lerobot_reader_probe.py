@@ -14,10 +14,38 @@ from __future__ import annotations
 import json
 import sys
 
+import importlib.util
+from pathlib import Path
+
 import numpy as np
 import torch
-from lerobot.__version__ import __version__
-from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+
+def _declare_torchvision_schemas_without_kernels() -> torch.library.Library | None:
+    """Let ``import torchvision`` finish when its C++ ops cannot load; returns the library to keep alive.
+
+    PyPI's torchvision 0.28 is built against the CUDA torch; beside the CPU torch 2.13.0 its
+    ``_C`` extension does not load (it links libtorch_cuda), and ``torchvision._meta_registrations``
+    then fails on its two unguarded ``register_fake`` calls (nms, qnms: "operator torchvision::nms
+    does not exist"). Declaring those two schemas, with no kernels, lets the import complete.
+    LeRobot's data set loader uses only torchvision's Python transforms, never these ops.
+    """
+    spec = importlib.util.find_spec("torchvision")
+    compiled = next(Path(spec.submodule_search_locations[0]).glob("_C*.so"), None)
+    try:
+        torch.ops.load_library(str(compiled))
+        return None
+    except (OSError, TypeError):
+        lib = torch.library.Library("torchvision", "DEF")  # noqa: TOR901
+        lib.define("nms(Tensor dets, Tensor scores, float iou_threshold) -> Tensor")
+        lib.define("qnms(Tensor dets, Tensor scores, float iou_threshold) -> Tensor")
+        return lib
+
+
+_TORCHVISION_SCHEMAS = _declare_torchvision_schemas_without_kernels()
+
+from lerobot.__version__ import __version__  # noqa: E402
+from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: E402
 
 BATCHES, BATCH = 4, 16
 CHUNK = 4
@@ -53,7 +81,7 @@ def probe(i: int, root: str, out: dict[str, np.ndarray]) -> dict:
 def main(argv: list[str]) -> int:
     out_path, roots = argv[0], argv[1:]
     out: dict[str, np.ndarray] = {}
-    summary = {"lerobot": __version__, "torch": torch.__version__,
+    summary = {"lerobot": __version__, "torch": torch.__version__, "torchvision_ops_stubbed": _TORCHVISION_SCHEMAS is not None,
                "folders": [probe(i, root, out) for i, root in enumerate(roots)]}
     np.savez(out_path, **out)
     print(json.dumps(summary))
