@@ -16,6 +16,14 @@ from typing import Any
 from coursekit.outputs import check_output, clean_leftovers, replace_dir, staging_dir
 
 
+def require_pyarrow() -> None:
+    """LeRobot's parquet files need pyarrow (environment.txt; ``pip install coursekit[lerobot]``)."""
+    try:
+        import pyarrow  # noqa: F401
+    except ModuleNotFoundError:
+        raise ValueError("LeRobot's format needs the pyarrow package: pip install pyarrow") from None
+
+
 def _clean(out: Path) -> None:
     for leftover in clean_leftovers(out):
         print(f"removed {str(leftover)!r}, left by an interrupted earlier run", file=sys.stderr)
@@ -23,6 +31,7 @@ def _clean(out: Path) -> None:
 
 def check_export_out(out: Path, data: Path, overwrite: bool) -> None:
     """Before any work: OUT_DIR is new, empty, or (with --overwrite) an earlier export; never the input."""
+    require_pyarrow()
     from coursekit.data.lerobot_export import is_lerobot_export
 
     check_output(out, what="coursekit LeRobot export", is_ours=is_lerobot_export, directory=True,
@@ -40,6 +49,7 @@ def write_export_folder(out: Path, write: Callable[[Path], Any]) -> Any:
 
 def check_import_out(out: Path, folder: Path, overwrite: bool) -> None:
     """Before any work: OUT is a new .npz, or (with --overwrite) a coursekit data set; never inside the input."""
+    require_pyarrow()
     from coursekit.data.episodes import is_dataset_file
 
     check_output(out, what="coursekit dataset", is_ours=is_dataset_file, directory=False, overwrite=overwrite,
