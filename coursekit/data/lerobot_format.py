@@ -143,7 +143,7 @@ def _index_columns(frames: Frames) -> dict[str, np.ndarray]:
             "task_index": np.repeat(np.asarray(frames.episode_tasks, dtype=np.int64), lengths)}
 
 
-def _file_of_each_episode(frames: Frames, sizes: np.ndarray) -> np.ndarray:
+def _file_of_each_episode(sizes: np.ndarray) -> np.ndarray:
     """(E,) running file number: whole episodes, a new file once one holds DATA_FILES_SIZE_MB."""
     files, current, used = [], 0, 0.0
     for size in sizes:
@@ -183,7 +183,7 @@ def write_folder(root: str | Path, frames: Frames) -> dict[str, Any]:
     arrow = {key: _arrow_column(values, features[key]) for key, values in columns.items()}
     ends, starts = frames.episode_ends, np.concatenate([[0], frames.episode_ends[:-1]])
     per_frame = sum(a.nbytes for a in arrow.values()) / max(len(columns["index"]), 1)
-    file_no = _file_of_each_episode(frames, (ends - starts) * per_frame)
+    file_no = _file_of_each_episode((ends - starts) * per_frame)
     for f in np.unique(file_no):
         rows = np.flatnonzero(np.isin(columns["episode_index"], np.flatnonzero(file_no == f)))
         path = root / DATA_PATH.format(chunk_index=int(f) // CHUNKS_SIZE, file_index=int(f) % CHUNKS_SIZE)

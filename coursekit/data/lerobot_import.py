@@ -85,9 +85,11 @@ def _selection(folder: LeRobotFolder, features: Sequence[str] | None) -> tuple[l
 
 
 def _by_convention(folder: LeRobotFolder, task: LeRobotTask, chosen: list[str]) -> dict[str, np.ndarray]:
-    if task.action_dim != (folder.features["action"].shape[0] if "action" in folder.features else -1):
+    if "action" not in folder.features:
+        raise ValueError(f"{str(folder.root)!r} has no 'action' feature (it has {sorted(folder.features)})")
+    if folder.features["action"].shape != (task.action_dim,):
         raise ValueError(f"{str(folder.root)!r}: {task.name} takes {task.action_dim}-d actions; the folder's 'action' "
-                         f"is {folder.features.get('action')}")
+                         f"has shape {list(folder.features['action'].shape)}")
     arrays = {"action": folder.column("action").astype(np.float64)}
     cameras = [k for k in chosen if folder.features[k].dtype in ("image", "video")]
     if len(cameras) > 1:
