@@ -22,6 +22,7 @@ from coursekit.cli import main  # noqa: E402
 from coursekit.data import lerobot_format  # noqa: E402
 from coursekit.data.episodes import EpisodeDataset  # noqa: E402
 from coursekit.data.lerobot_pusht import lerobot_keypoints  # noqa: E402
+from coursekit.data.lerobot_reader import read_folder  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -200,3 +201,20 @@ def test_training_on_the_imported_data_is_training_on_the_original(name, policy,
         losses.append([float(r["loss"]) for r in csv.DictReader((run / "metrics.csv").open())])
         weights.append(next(run.glob("*.safetensors")).read_bytes())
     assert losses[0] == losses[1] and weights[0] == weights[1]  # the same batches, gradients and weights at every step
+
+
+def test_images_flag_renders_the_pusht_camera_frames(demos, tmp_path):
+    """--images: observation.image = the env's 96 x 96 observation renders of the states; the .npz still comes back as it was."""
+    from coursekit.envs.pusht_render import PushTRenderer
+
+    out = tmp_path / "out"
+    assert main(["export", "lerobot", str(demos["pusht"]), str(out), "--images"]) == 0
+    _, info = frames_of(out)
+    assert info["features"]["observation.image"]["shape"] == [96, 96, 3]
+    data = EpisodeDataset.load(demos["pusht"])
+    frames = read_folder(out).column("observation.image")  # PNG decoded
+    renderer = PushTRenderer(96)
+    for t in (0, 50, data.n_steps - 1):
+        np.testing.assert_array_equal(frames[t], renderer.render(data["state"][t]))
+    assert main(["import", "lerobot", str(out), str(tmp_path / "back.npz")]) == 0
+    assert_same(data, EpisodeDataset.load(tmp_path / "back.npz"))
