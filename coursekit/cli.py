@@ -25,6 +25,8 @@ COMMANDS: dict[str, str] = {
     "exercises": "exercises",
     "check": "check",
     "grade": "grade",
+    "export": "export",
+    "import": "import_",
 }
 
 

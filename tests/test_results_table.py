@@ -19,7 +19,7 @@ def test_every_row_has_the_schema():
         for field, kind in REQUIRED.items():
             assert isinstance(entry.get(field), kind), f"{key}: {field} missing or not {kind.__name__}"
         assert isinstance(entry["value"], (int, float, str)), key
-        module = re.search(r"-m benchmarks\.(bench_\w+)", entry["command"])
+        module = re.search(r"-m benchmarks\.((?:bench|check)_\w+)", entry["command"])  # check_*: needs PyPI, not run_all
         assert module, f"{key}: command {entry['command']!r} is not a benchmark"
         assert (results.ROOT / "benchmarks" / f"{module.group(1)}.py").is_file(), f"{key}: no benchmark {module.group(1)}"
         if "interval" in entry:

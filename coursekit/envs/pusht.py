@@ -23,7 +23,8 @@ Observations (``obs_type``):
   (block_x/y = body origin, the middle of the crossbar's top edge, not the centre of gravity).
 - ``"keypoints"``: (18,) float64 [agent_x, agent_y, k0x, k0y, ..., k7x, k7y] with the 8 T corners
   in the order of ``pusht_geometry.KEYPOINTS_LOCAL`` (crossbar (-60,30), (60,30), (60,0), (-60,0),
-  then stem (-15,30), (15,30), (15,120), (-15,120)), as the gym-pusht package (not the paper's 9).
+  then stem (-15,30), (15,30), (15,120), (-15,120)): gym-pusht's 8 corners (not the paper's 9),
+  though gym-pusht lists the crossbar from the other end (``coursekit.data.lerobot_pusht``).
 - ``"pixels"``: (H, W, 3) uint8 image, 96 x 96 by default (``obs_size``); the action target is
   never drawn into observations.
 - ``"pixels_agent_pos"``: dict {"pixels": (H, W, 3) uint8, "agent_pos": (2,) float64}.
