@@ -12,11 +12,16 @@ Layout::
                            "weights": {"file": "model.safetensors", "sha256": "...", "n_tensors": N,
                                        "n_parameters": P, "config_sha256": "..."}, "coursekit_version": "..."}
 
-``weights.config_sha256`` binds the weights to the policy_type, config and normalisers they were
-trained with (the SHA-256 of their canonical JSON): editing any of them in config.json, e.g. a
-changed horizon that would still fit the tensors' shapes, is refused. The weights file itself is
-byte-identical for identical tensors (safetensors header with sorted metadata), so the recorded
-sha256 is reproducible.
+The weights are bound to the policy_type, config and normalisers they were trained with (the
+SHA-256 of their canonical JSON, ``config_sha256``), in both files: the safetensors header's
+metadata (``{"format", "policy_type", "config_sha256"}``) and ``weights.config_sha256`` in
+config.json. Loading recomputes the digest from config.json and checks it against the weights'
+own metadata, so an edited config.json (a changed horizon that would still fit the tensors'
+shapes, a deleted ``config_sha256``, a recomputed ``sha256`` of weights swapped in from a flow
+or regression checkpoint) is refused. Weights saved before the digest went into the metadata
+(the shipped checkpoints among them) carry only the policy type there; for those the digest in
+config.json is required. The weights file is byte-identical for identical tensors and config
+(safetensors header with sorted metadata), so the recorded sha256 is reproducible.
 
 Writing is atomic at the directory level: both files go into a hidden staging directory beside
 CKPT, which is then exchanged with CKPT in one step (``coursekit.outputs.replace_dir``), so a
@@ -106,23 +111,24 @@ def save_checkpoint(policy: Any, path: str | os.PathLike, *, dataset_meta: dict[
         tensors = {k: v.half() if v.is_floating_point() else v for k, v in tensors.items()}
     check_replaceable(path)
     clean_leftovers(path)  # temporaries of a killed earlier write to this place
+    info = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "policy_type": policy.policy_type,
+        "config": config_to_dict(policy.config),
+        "normalizers": normalizers_to_json(policy.normalizers),
+        "dataset": dataset_meta or {},
+        "training": training or {},
+        "coursekit_version": coursekit.__version__,
+    }
+    digest = _config_digest(info)
     with staging_dir(path) as tmp:
         weights = tmp / WEIGHTS_FILE
-        _write_safetensors(tensors, weights, {"format": FORMAT, "policy_type": policy.policy_type})
-        info = {
-            "format": FORMAT,
-            "format_version": FORMAT_VERSION,
-            "policy_type": policy.policy_type,
-            "config": config_to_dict(policy.config),
-            "normalizers": normalizers_to_json(policy.normalizers),
-            "dataset": dataset_meta or {},
-            "training": training or {},
-            "weights": {"file": WEIGHTS_FILE, "sha256": _sha256(weights), "n_tensors": len(tensors),
-                        "dtype": "float16" if half else "float32",
-                        "n_parameters": int(sum(p.numel() for p in policy.parameters()))},
-            "coursekit_version": coursekit.__version__,
-        }
-        info["weights"]["config_sha256"] = _config_digest(info)
+        _write_safetensors(tensors, weights, {"format": FORMAT, "policy_type": policy.policy_type,
+                                              "config_sha256": digest})
+        info["weights"] = {"file": WEIGHTS_FILE, "sha256": _sha256(weights), "n_tensors": len(tensors),
+                           "dtype": "float16" if half else "float32",
+                           "n_parameters": int(sum(p.numel() for p in policy.parameters())), "config_sha256": digest}
         (tmp / CONFIG_FILE).write_text(json.dumps(info, indent=1, sort_keys=True) + "\n")
         umask = os.umask(0)
         os.umask(umask)
@@ -213,7 +219,22 @@ def read_checkpoint_info(path: str | os.PathLike) -> dict[str, Any]:
     for key in ("policy_type", "config", "normalizers", "weights"):
         if key not in info:
             raise CheckpointError(f"{str(cfg)!r} lacks the {key!r} entry")
+    for key, kind in _ENTRY_TYPES.items():
+        if (key in info or key not in _OPTIONAL) and not isinstance(info.get(key), kind):
+            raise CheckpointError(f"{str(cfg)!r}: {key!r} must be a JSON {_JSON_NAME[kind]}, got {_short(info.get(key))} "
+                                  f"({type(info.get(key)).__name__}); the checkpoint is corrupt or hand-edited")
     return info
+
+
+# config.json's entries and the JSON type each must have (dataset and training may be absent)
+_ENTRY_TYPES = {"policy_type": str, "config": dict, "normalizers": dict, "weights": dict, "dataset": dict, "training": dict}
+_OPTIONAL = ("dataset", "training")
+_JSON_NAME = {str: "string", dict: "object"}
+
+
+def _short(value: Any, limit: int = 60) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit] + "..."
 
 
 def training_budget(info: dict[str, Any] | str | os.PathLike) -> dict[str, Any]:
@@ -251,7 +272,7 @@ def load_checkpoint(path: str | os.PathLike, device: Any = "auto", expected_type
         device: "auto", "cpu", "cuda", ... (``coursekit.device.resolve_device``).
         expected_type: if given, the checkpoint's policy_type must equal it.
     """
-    from safetensors import SafetensorError
+    from safetensors import SafetensorError, safe_open
     from safetensors.torch import load_file
 
     from coursekit.config import config_from_dict
@@ -291,8 +312,10 @@ def load_checkpoint(path: str | os.PathLike, device: Any = "auto", expected_type
                               f"{str(entry.get('sha256'))[:12]}...): truncated, corrupt or from another checkpoint")
     try:
         tensors = load_file(str(weights))
+        saved_with = safe_open(str(weights), framework="pt").metadata() or {}
     except (SafetensorError, OSError, ValueError) as exc:
         raise CheckpointError(f"{str(weights)!r} cannot be read as safetensors ({exc})") from exc
+    check_weights_binding(info, saved_with, str(weights))
     policy = cls(config, normalizers)
     expected = policy.state_dict()
     missing, unexpected = sorted(set(expected) - set(tensors)), sorted(set(tensors) - set(expected))
@@ -305,6 +328,34 @@ def load_checkpoint(path: str | os.PathLike, device: Any = "auto", expected_type
                                   f"the config builds {tuple(expected[name].shape)}")
     policy.load_state_dict(tensors, strict=True)  # copies (and casts float16 storage) into the parameters
     return policy.to(resolve_device(device)).eval()
+
+
+def check_weights_binding(info: dict[str, Any], metadata: dict[str, str], weights: str) -> None:
+    """Refuse weights whose own metadata disagrees with config.json ``info`` (CheckpointError).
+
+    ``metadata`` is the safetensors header's ``__metadata__`` of the file ``weights``: the policy
+    type must be config.json's, and the config digest it was saved with must be the one
+    recomputed from config.json now. Weights written before the digest went into the metadata
+    (the shipped checkpoints) carry the policy type only: config.json's ``weights.config_sha256``
+    must then be there (and match, checked by the caller), or the config cannot be verified.
+    """
+    saved_type = metadata.get("policy_type")
+    if metadata.get("format") != FORMAT or not saved_type:
+        raise CheckpointError(f"{weights!r} carries no coursekit metadata (format, policy_type): these weights were "
+                              f"not saved by coursekit.checkpoint.save_checkpoint, so they cannot be checked against "
+                              f"config.json")
+    if saved_type != info["policy_type"]:
+        raise CheckpointError(f"{weights!r} holds the weights of a {saved_type!r} policy but config.json says "
+                              f"{info['policy_type']!r}: weights from another checkpoint")
+    saved_digest = metadata.get("config_sha256")
+    if saved_digest is None and info["weights"].get("config_sha256") is None:
+        raise CheckpointError(f"{weights!r} predates the config digest in its metadata and config.json lacks "
+                              f"weights.config_sha256, so config.json cannot be checked against the weights: restore "
+                              f"the entry (or the original config.json)")
+    if saved_digest is not None and saved_digest != _config_digest(info):
+        raise CheckpointError(f"{weights!r} was saved with another policy_type/config/normalizers than config.json's "
+                              f"(config_sha256 in the weights' metadata {saved_digest[:12]}... vs "
+                              f"{_config_digest(info)[:12]}... now): config.json edited or from another checkpoint")
 
 
 class CheckpointSaver:

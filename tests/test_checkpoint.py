@@ -111,8 +111,28 @@ def test_never_unpickles(saved):
         load_checkpoint(path, device="cpu")
 
 
+def _as_older_checkpoint(path):
+    """Rewrite the weights as coursekit wrote them before the config digest went into their metadata
+    (same tensors, metadata {format, policy_type} only), like the shipped checkpoints."""
+    from safetensors.torch import load_file, save_file
+
+    w = path / "model.safetensors"
+    save_file(load_file(str(w)), str(w), metadata={"format": "coursekit-checkpoint", "policy_type": "diffusion"})
+    _edit_config(path, lambda i: i["weights"].update(sha256=_sha256(w)))
+
+
+def test_a_consistent_edit_of_config_json_is_refused_by_the_weights_metadata(saved):
+    _, path = saved
+    _edit_config(path, lambda i: i["config"].update(horizon=32))  # digest in config.json re-bound, weights' not
+    with pytest.raises(CheckpointError, match="was saved with another policy_type/config/normalizers"):
+        load_checkpoint(path, device="cpu")
+
+
 def test_refuses_shape_mismatch(saved):
     _, path = saved
+    _as_older_checkpoint(path)
+    assert torch.equal(next(iter(load_checkpoint(path, device="cpu").state_dict().values())),
+                       next(iter(saved[0].state_dict().values())))  # an older checkpoint still loads
     _edit_config(path, lambda i: i["config"]["unet"].update(down_dims=[16, 64]))
     with pytest.raises(CheckpointError, match="has shape"):
         load_checkpoint(path, device="cpu")
