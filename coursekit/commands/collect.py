@@ -8,7 +8,7 @@ import sys
 import time
 from pathlib import Path
 
-from coursekit.commands._args import MAX_SEED, positive_int, seed_int
+from coursekit.commands._args import MAX_SEED, int_in, seed_int
 
 HELP = "generate scripted demonstrations (pusht, aloha-cube, aloha-insertion) into a dataset file"
 
@@ -19,11 +19,14 @@ TASKS: dict[str, str] = {
     "aloha-insertion": "coursekit.experts.aloha_scripted:collect_insertion",
 }
 DEFAULT_EPISODES = {"pusht": 200, "aloha-cube": 50, "aloha-insertion": 50}
+MAX_EPISODES = 100_000
+"""More demonstrations cannot be meant: the experts run ~2 PushT episodes/s, so 100000 is already a day's work."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("task", choices=sorted(TASKS), help="which task's scripted expert to run")
-    parser.add_argument("--episodes", type=positive_int, default=None, help="number of demonstrations (default: 200 PushT, 50 ALOHA)")
+    parser.add_argument("--episodes", type=int_in(1, MAX_EPISODES), default=None,
+                        help=f"number of demonstrations, at most {MAX_EPISODES} (default: 200 PushT, 50 ALOHA)")
     parser.add_argument("--seed", type=seed_int, default=0, help="seed of the first episode; episode i uses seed + i")
     parser.add_argument("--out", type=Path, default=None, help="output .npz (default: outputs/data/<task>_<episodes>ep_seed<seed>[_noise<levels>].npz)")
     parser.add_argument("--action-noise", default=None,

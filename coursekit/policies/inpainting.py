@@ -175,7 +175,7 @@ def predict_inpainted(policy: Any, obs_history: Any, target: Any, weights: Any, 
             method = sampling.get("sampler") or c.integration_method
             if method != "euler":
                 raise ValueError(f"real-time chunking on a flow policy integrates with Euler, got sampler {method!r}")
-            head = EulerHead(policy.velocity, cond, int(sampling.get("num_inference_steps") or c.num_inference_steps))
+            head = EulerHead(policy.velocity, cond, policy.describe_sampling(**sampling)["num_inference_steps"])
         replace = None
         if prefix == "replace" and frozen:
             replace = torch.zeros(c.horizon, dtype=torch.bool, device=dev)
