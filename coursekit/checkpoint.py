@@ -13,15 +13,13 @@ Layout::
                                        "n_parameters": P, "config_sha256": "..."}, "coursekit_version": "..."}
 
 The weights are bound to the policy_type, config and normalisers they were trained with (the
-SHA-256 of their canonical JSON, ``config_sha256``), in both files: the safetensors header's
-metadata (``{"format", "policy_type", "config_sha256"}``) and ``weights.config_sha256`` in
-config.json. Loading recomputes the digest from config.json and checks it against the weights'
-own metadata, so an edited config.json (a changed horizon that would still fit the tensors'
-shapes, a deleted ``config_sha256``, a recomputed ``sha256`` of weights swapped in from a flow
-or regression checkpoint) is refused. Weights saved before the digest went into the metadata
-(the shipped checkpoints among them) carry only the policy type there; for those the digest in
-config.json is required. The weights file is byte-identical for identical tensors and config
-(safetensors header with sorted metadata), so the recorded sha256 is reproducible.
+SHA-256 of their canonical JSON, ``config_sha256``) in both files: config.json's
+``weights.config_sha256`` and the weights' own safetensors metadata (``coursekit.weights_file``),
+so an edited config.json (a horizon that still fits the tensors' shapes, a deleted
+``config_sha256``, weights swapped in from a flow or regression checkpoint with every sha
+recomputed) is refused. Weights saved before the digest went into their metadata (the shipped
+checkpoints) carry the policy type only; for those config.json's digest is required. Identical
+tensors and config give a byte-identical weights file, so the recorded sha256 is reproducible.
 
 Writing is atomic at the directory level: both files go into a hidden staging directory beside
 CKPT, which is then exchanged with CKPT in one step (``coursekit.outputs.replace_dir``), so a
@@ -36,7 +34,6 @@ what is wrong. ``torch.load`` is never used.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import shutil
@@ -44,8 +41,8 @@ from pathlib import Path
 from typing import Any
 
 from coursekit.outputs import clean_leftovers, replace_dir, staging_dir
+from coursekit.weights_file import FORMAT, check_weights_binding, config_digest, file_sha256, write_safetensors
 
-FORMAT = "coursekit-checkpoint"
 FORMAT_VERSION = 1
 WEIGHTS_FILE = "model.safetensors"
 CONFIG_FILE = "config.json"
@@ -53,40 +50,6 @@ CONFIG_FILE = "config.json"
 
 class CheckpointError(ValueError):
     """A checkpoint that is missing, corrupt, truncated or does not match the policy it claims."""
-
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
-def _config_digest(info: dict[str, Any]) -> str:
-    """SHA-256 of the canonical JSON of what rebuilds the policy: policy_type, config, normalizers."""
-    bound = {k: info[k] for k in ("policy_type", "config", "normalizers")}
-    return hashlib.sha256(json.dumps(bound, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
-
-
-def _write_safetensors(tensors: dict[str, Any], path: Path, metadata: dict[str, str]) -> None:
-    """safetensors bytes with the metadata in sorted order: identical tensors -> identical file.
-
-    ``safetensors.torch.save`` orders the tensors deterministically but writes ``__metadata__``
-    in a hash map's order, which changes from process to process; the header is re-written here
-    with sorted keys (the data offsets are relative to the data section, so they stay valid).
-    """
-    from safetensors.torch import save
-
-    raw = save(tensors)
-    n = int.from_bytes(raw[:8], "little")
-    header = json.loads(raw[8:8 + n])
-    header = {"__metadata__": dict(sorted(metadata.items())), **header}
-    text = json.dumps(header, separators=(",", ":")).encode()
-    text += b" " * (-len(text) % 8)  # the data section stays 8-byte aligned
-    with open(path, "wb") as fh:
-        fh.write(len(text).to_bytes(8, "little") + text)
-        fh.write(raw[8 + n:])
 
 
 def save_checkpoint(policy: Any, path: str | os.PathLike, *, dataset_meta: dict[str, Any] | None = None,
@@ -121,12 +84,12 @@ def save_checkpoint(policy: Any, path: str | os.PathLike, *, dataset_meta: dict[
         "training": training or {},
         "coursekit_version": coursekit.__version__,
     }
-    digest = _config_digest(info)
+    digest = config_digest(info)
     with staging_dir(path) as tmp:
         weights = tmp / WEIGHTS_FILE
-        _write_safetensors(tensors, weights, {"format": FORMAT, "policy_type": policy.policy_type,
+        write_safetensors(tensors, weights, {"format": FORMAT, "policy_type": policy.policy_type,
                                               "config_sha256": digest})
-        info["weights"] = {"file": WEIGHTS_FILE, "sha256": _sha256(weights), "n_tensors": len(tensors),
+        info["weights"] = {"file": WEIGHTS_FILE, "sha256": file_sha256(weights), "n_tensors": len(tensors),
                            "dtype": "float16" if half else "float32",
                            "n_parameters": int(sum(p.numel() for p in policy.parameters())), "config_sha256": digest}
         (tmp / CONFIG_FILE).write_text(json.dumps(info, indent=1, sort_keys=True) + "\n")
@@ -300,13 +263,13 @@ def load_checkpoint(path: str | os.PathLike, device: Any = "auto", expected_type
         raise CheckpointError(f"checkpoint {str(path)!r}: weights.file must name a file inside the checkpoint "
                               f"directory (like {WEIGHTS_FILE!r}), got {name!r}")
     bound = entry.get("config_sha256")
-    if bound is not None and bound != _config_digest(info):
+    if bound is not None and bound != config_digest(info):
         raise CheckpointError(f"checkpoint {str(path)!r}: config.json's policy_type/config/normalizers differ from those "
                               f"the weights were saved with (config_sha256 mismatch): edited or from another checkpoint")
     weights = path / name
     if weights.is_symlink() or not weights.is_file():
         raise FileNotFoundError(f"checkpoint {str(path)!r} has no weights file {name!r} (a regular file, not a link)")
-    digest = _sha256(weights)
+    digest = file_sha256(weights)
     if digest != entry.get("sha256"):
         raise CheckpointError(f"{str(weights)!r} does not match config.json (sha256 {digest[:12]}... vs "
                               f"{str(entry.get('sha256'))[:12]}...): truncated, corrupt or from another checkpoint")
@@ -315,7 +278,10 @@ def load_checkpoint(path: str | os.PathLike, device: Any = "auto", expected_type
         saved_with = safe_open(str(weights), framework="pt").metadata() or {}
     except (SafetensorError, OSError, ValueError) as exc:
         raise CheckpointError(f"{str(weights)!r} cannot be read as safetensors ({exc})") from exc
-    check_weights_binding(info, saved_with, str(weights))
+    try:
+        check_weights_binding(info, saved_with, str(weights))
+    except ValueError as exc:
+        raise CheckpointError(str(exc)) from None
     policy = cls(config, normalizers)
     expected = policy.state_dict()
     missing, unexpected = sorted(set(expected) - set(tensors)), sorted(set(tensors) - set(expected))
@@ -328,34 +294,6 @@ def load_checkpoint(path: str | os.PathLike, device: Any = "auto", expected_type
                                   f"the config builds {tuple(expected[name].shape)}")
     policy.load_state_dict(tensors, strict=True)  # copies (and casts float16 storage) into the parameters
     return policy.to(resolve_device(device)).eval()
-
-
-def check_weights_binding(info: dict[str, Any], metadata: dict[str, str], weights: str) -> None:
-    """Refuse weights whose own metadata disagrees with config.json ``info`` (CheckpointError).
-
-    ``metadata`` is the safetensors header's ``__metadata__`` of the file ``weights``: the policy
-    type must be config.json's, and the config digest it was saved with must be the one
-    recomputed from config.json now. Weights written before the digest went into the metadata
-    (the shipped checkpoints) carry the policy type only: config.json's ``weights.config_sha256``
-    must then be there (and match, checked by the caller), or the config cannot be verified.
-    """
-    saved_type = metadata.get("policy_type")
-    if metadata.get("format") != FORMAT or not saved_type:
-        raise CheckpointError(f"{weights!r} carries no coursekit metadata (format, policy_type): these weights were "
-                              f"not saved by coursekit.checkpoint.save_checkpoint, so they cannot be checked against "
-                              f"config.json")
-    if saved_type != info["policy_type"]:
-        raise CheckpointError(f"{weights!r} holds the weights of a {saved_type!r} policy but config.json says "
-                              f"{info['policy_type']!r}: weights from another checkpoint")
-    saved_digest = metadata.get("config_sha256")
-    if saved_digest is None and info["weights"].get("config_sha256") is None:
-        raise CheckpointError(f"{weights!r} predates the config digest in its metadata and config.json lacks "
-                              f"weights.config_sha256, so config.json cannot be checked against the weights: restore "
-                              f"the entry (or the original config.json)")
-    if saved_digest is not None and saved_digest != _config_digest(info):
-        raise CheckpointError(f"{weights!r} was saved with another policy_type/config/normalizers than config.json's "
-                              f"(config_sha256 in the weights' metadata {saved_digest[:12]}... vs "
-                              f"{_config_digest(info)[:12]}... now): config.json edited or from another checkpoint")
 
 
 class CheckpointSaver:

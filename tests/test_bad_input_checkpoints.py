@@ -22,12 +22,13 @@ import torch
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from coursekit.checkpoint import CheckpointError, _sha256, load_checkpoint, save_checkpoint
+from coursekit.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from coursekit.config import config_from_dict, config_to_dict
 from coursekit.data import MinMaxNormalizer
 from coursekit.nn.unet1d import UNet1DConfig
 from coursekit.policies.act import ACTConfig
 from coursekit.policies.diffusion import DiffusionPolicy, DiffusionPolicyConfig
+from coursekit.weights_file import config_digest, file_sha256
 
 ROOT = Path(__file__).resolve().parent.parent
 TINY = UNet1DConfig(down_dims=(16, 32), kernel_size=3, n_groups=4, diffusion_step_embed_dim=16)
@@ -205,7 +206,7 @@ def test_identical_policies_give_identical_weight_bytes_in_any_process(tmp_path)
     assert len(files) == 6
     assert len({hashlib.sha256(f.read_bytes()).hexdigest() for f in files}) == 1
     recorded = {json.loads((f.parent / "config.json").read_text())["weights"]["sha256"] for f in files}
-    assert recorded == {_sha256(files[0])}
+    assert recorded == {file_sha256(files[0])}
     raw = files[0].read_bytes()
     header = json.loads(raw[8:8 + int.from_bytes(raw[:8], "little")])
     assert list(header["__metadata__"]) == sorted(header["__metadata__"])
@@ -282,11 +283,9 @@ def _three_heads(root: Path) -> dict[str, Path]:
 
 def _rebind(path: Path) -> None:
     """What a careful forger does to config.json: recompute both the weights' sha256 and the config digest."""
-    from coursekit.checkpoint import _config_digest
-
     info = json.loads((path / "config.json").read_text())
-    info["weights"]["sha256"] = _sha256(path / "model.safetensors")
-    info["weights"]["config_sha256"] = _config_digest(info)
+    info["weights"]["sha256"] = file_sha256(path / "model.safetensors")
+    info["weights"]["config_sha256"] = config_digest(info)
     (path / "config.json").write_text(json.dumps(info))
 
 
@@ -299,7 +298,7 @@ def _as_older_weights(path: Path) -> None:
     ptype = json.loads((path / "config.json").read_text())["policy_type"]
     save_file(load_file(str(w)), str(w), metadata={"format": "coursekit-checkpoint", "policy_type": ptype})
     info = json.loads((path / "config.json").read_text())
-    info["weights"]["sha256"] = _sha256(w)
+    info["weights"]["sha256"] = file_sha256(w)
     (path / "config.json").write_text(json.dumps(info))
 
 
@@ -364,13 +363,11 @@ def test_weights_without_coursekit_metadata_are_refused(tmp_path):
 def test_new_weights_carry_type_and_digest_in_their_metadata(tmp_path):
     from safetensors import safe_open
 
-    from coursekit.checkpoint import _config_digest
-
     for name, path in _three_heads(tmp_path).items():
         info = json.loads((path / "config.json").read_text())
         meta = safe_open(str(path / "model.safetensors"), framework="pt").metadata()
         assert meta == {"format": "coursekit-checkpoint", "policy_type": info["policy_type"],
-                        "config_sha256": _config_digest(info)} == {**meta, "config_sha256": info["weights"]["config_sha256"]}, name
+                        "config_sha256": config_digest(info)} == {**meta, "config_sha256": info["weights"]["config_sha256"]}, name
 
 
 # ---- any hand edit of config.json: refused in one line naming the entry, or harmless ---------------

@@ -39,6 +39,7 @@ import numpy as np
 import torch
 
 from coursekit.execution.rtc import MAX_GUIDANCE, sample_guided
+from coursekit.policies.flow import check_steps
 
 
 PREFIX_MODES = ("guide", "replace")
@@ -175,7 +176,8 @@ def predict_inpainted(policy: Any, obs_history: Any, target: Any, weights: Any, 
             method = sampling.get("sampler") or c.integration_method
             if method != "euler":
                 raise ValueError(f"real-time chunking on a flow policy integrates with Euler, got sampler {method!r}")
-            head = EulerHead(policy.velocity, cond, policy.describe_sampling(**sampling)["num_inference_steps"])
+            n = sampling.get("num_inference_steps")
+            head = EulerHead(policy.velocity, cond, c.num_inference_steps if n is None else check_steps(n))
         replace = None
         if prefix == "replace" and frozen:
             replace = torch.zeros(c.horizon, dtype=torch.bool, device=dev)
