@@ -64,6 +64,14 @@ def _more_originals(root: Path, unet, norms, meta) -> None:
     info = json.loads((root / "swapped" / "config.json").read_text())
     info["weights"].update(sha256=file_sha256(root / "swapped" / "model.safetensors"), config_sha256=config_digest(info))
     (root / "swapped" / "config.json").write_text(json.dumps(info))
+    edits = {"edited": lambda i: (i["weights"].pop("config_sha256"), i["config"].update(horizon=32)),  # Tp fits the tensors
+             "illtyped": lambda i: i.update(config=["horizon", 16]),
+             "nested": lambda i: i["normalizers"].update(obs=[[0.0] * 6, [512.0] * 6])}
+    for name, edit in edits.items():
+        shutil.copytree(root / "ckpt", root / name)
+        info = json.loads((root / name / "config.json").read_text())
+        edit(info)
+        (root / name / "config.json").write_text(json.dumps(info))
     demos = EpisodeDataset.load(root / "demos.npz")
     action = demos["action"]
     nan = action.copy()
@@ -83,7 +91,7 @@ def area(tmp_path, originals):
     (tmp_path / "empty").mkdir()
     for data in ("demos", "wide", "text", "nan", "empty"):
         shutil.copy(originals / f"{data}.npz", tmp_path / f"{data}.npz")
-    for ckpt in ("ckpt", "flow", "act", "swapped"):
+    for ckpt in ("ckpt", "flow", "act", "swapped", "edited", "illtyped", "nested"):
         shutil.copytree(originals / ckpt, tmp_path / ckpt)
     return tmp_path
 
@@ -184,6 +192,9 @@ CASES = [
     ("eval {A}/ckpt --episodes 2 --max-steps 2 --record {A}/replay --record-episodes 5", "--record-episodes 5 needs --record DIR and at most --episodes (2)"),
     ("eval {A}/ckpt --episodes 2 --max-steps 2 --record-episodes 1", "--record-episodes 1 needs --record DIR"),
     ("eval {A}/swapped --episodes 1 --max-steps 2", "model.safetensors' holds the weights of a 'flow' policy but config.json says 'diffusion'"),
+    ("eval {A}/edited --episodes 1 --max-steps 2", "model.safetensors' was saved with another policy_type/config/normalizers than config.json's"),
+    ("eval {A}/illtyped --episodes 1 --max-steps 2", "config.json': 'config' must be a JSON object, got ['horizon', 16] (list)"),
+    ("eval {A}/nested --episodes 1 --max-steps 2", "normaliser 'obs' must be a dict {'kind': ..., 'state': {stat: list}}, got"),
     ("eval {A}/ckpt --episodes 1 --max-steps 2 --device tpu", "got 'tpu'"),
     ("eval {A}/ckpt --episodes 1 --max-steps 2 --no-ensembling", "--no-ensembling does not apply to '{A}/ckpt': it holds a 'diffusion' policy"),
     ("eval {A}/ckpt --episodes 1 --max-steps 2 --ensemble-decay 0.1", "--ensemble-decay 0.1 does not apply to '{A}/ckpt'"),
