@@ -146,9 +146,10 @@ def run(args: argparse.Namespace) -> int:
     config = TrainConfig(**{**recipe, **overrides}, max_steps=args.steps, minutes=args.minutes, seed=args.seed,
                          num_threads=args.threads, checkpoint_every_minutes=args.checkpoint_every,
                          progress=not args.no_progress)
+    cut = f" (batch size {config.batch_size} cut to them)" if config.batch_size > len(batches) else ""
     meta = {**dataset.meta, "path": str(args.data), "n_steps": dataset.n_steps, "n_episodes": dataset.n_episodes}
     print(f"{args.policy} policy on {features}, {policy.num_parameters() / 1e6:.2f} M parameters, {len(batches)} "
-          f"training samples from {dataset.n_episodes} episodes; device {policy.device}")
+          f"training samples from {dataset.n_episodes} episodes{cut}; device {policy.device}")
     prior = warm_start(policy, args.init_from) if args.init_from is not None else None
     if prior is not None:
         print(f"warm start from {args.init_from} ({prior['steps']} steps, {prior['seconds']} s)")
