@@ -12,11 +12,14 @@ Layout::
                            "weights": {"file": "model.safetensors", "sha256": "...", "n_tensors": N,
                                        "n_parameters": P, "config_sha256": "..."}, "coursekit_version": "..."}
 
-``weights.config_sha256`` binds the weights to the policy_type, config and normalisers they were
-trained with (the SHA-256 of their canonical JSON): editing any of them in config.json, e.g. a
-changed horizon that would still fit the tensors' shapes, is refused. The weights file itself is
-byte-identical for identical tensors (safetensors header with sorted metadata), so the recorded
-sha256 is reproducible.
+The weights are bound to the policy_type, config and normalisers they were trained with (the
+SHA-256 of their canonical JSON, ``config_sha256``) in both files: config.json's
+``weights.config_sha256`` and the weights' own safetensors metadata (``coursekit.weights_file``),
+so an edited config.json (a horizon that still fits the tensors' shapes, a deleted
+``config_sha256``, weights swapped in from a flow or regression checkpoint with every sha
+recomputed) is refused. Weights saved before the digest went into their metadata (the shipped
+checkpoints) carry the policy type only; for those config.json's digest is required. Identical
+tensors and config give a byte-identical weights file, so the recorded sha256 is reproducible.
 
 Writing is atomic at the directory level: both files go into a hidden staging directory beside
 CKPT, which is then exchanged with CKPT in one step (``coursekit.outputs.replace_dir``), so a
@@ -34,7 +37,6 @@ what is wrong. ``torch.load`` is never used.
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import json
 import os
 import shutil
@@ -43,8 +45,8 @@ from typing import Any
 
 from coursekit.output_lock import OutputLock, lock_output
 from coursekit.outputs import replace_dir, staging_dir
+from coursekit.weights_file import FORMAT, check_weights_binding, config_digest, file_sha256, write_safetensors
 
-FORMAT = "coursekit-checkpoint"
 FORMAT_VERSION = 1
 WEIGHTS_FILE = "model.safetensors"
 CONFIG_FILE = "config.json"
@@ -52,40 +54,6 @@ CONFIG_FILE = "config.json"
 
 class CheckpointError(ValueError):
     """A checkpoint that is missing, corrupt, truncated or does not match the policy it claims."""
-
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
-def _config_digest(info: dict[str, Any]) -> str:
-    """SHA-256 of the canonical JSON of what rebuilds the policy: policy_type, config, normalizers."""
-    bound = {k: info[k] for k in ("policy_type", "config", "normalizers")}
-    return hashlib.sha256(json.dumps(bound, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
-
-
-def _write_safetensors(tensors: dict[str, Any], path: Path, metadata: dict[str, str]) -> None:
-    """safetensors bytes with the metadata in sorted order: identical tensors -> identical file.
-
-    ``safetensors.torch.save`` orders the tensors deterministically but writes ``__metadata__``
-    in a hash map's order, which changes from process to process; the header is re-written here
-    with sorted keys (the data offsets are relative to the data section, so they stay valid).
-    """
-    from safetensors.torch import save
-
-    raw = save(tensors)
-    n = int.from_bytes(raw[:8], "little")
-    header = json.loads(raw[8:8 + n])
-    header = {"__metadata__": dict(sorted(metadata.items())), **header}
-    text = json.dumps(header, separators=(",", ":")).encode()
-    text += b" " * (-len(text) % 8)  # the data section stays 8-byte aligned
-    with open(path, "wb") as fh:
-        fh.write(len(text).to_bytes(8, "little") + text)
-        fh.write(raw[8 + n:])
 
 
 def save_checkpoint(policy: Any, path: str | os.PathLike, *, dataset_meta: dict[str, Any] | None = None,
@@ -116,28 +84,33 @@ def save_checkpoint(policy: Any, path: str | os.PathLike, *, dataset_meta: dict[
 
 def _write_staged(policy: Any, path: Path, tensors: dict[str, Any], lock: OutputLock, *,
                   dataset_meta: dict[str, Any] | None, training: dict[str, Any] | None, half: bool) -> None:
-    """Both files into a recorded staging directory beside ``path``, then one exchange with ``path``."""
+    """Both files into a recorded staging directory beside ``path``, then one exchange with ``path``.
+
+    The config digest goes into the weights' own metadata as well as config.json, so that loading
+    can tell weights from another checkpoint or an edited config (``weights_file.check_weights_binding``).
+    """
     import coursekit
     from coursekit.config import config_to_dict
     from coursekit.policies.base import normalizers_to_json
 
+    info = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "policy_type": policy.policy_type,
+        "config": config_to_dict(policy.config),
+        "normalizers": normalizers_to_json(policy.normalizers),
+        "dataset": dataset_meta or {},
+        "training": training or {},
+        "coursekit_version": coursekit.__version__,
+    }
+    digest = config_digest(info)
     with staging_dir(path, lock) as tmp:
         weights = tmp / WEIGHTS_FILE
-        _write_safetensors(tensors, weights, {"format": FORMAT, "policy_type": policy.policy_type})
-        info = {
-            "format": FORMAT,
-            "format_version": FORMAT_VERSION,
-            "policy_type": policy.policy_type,
-            "config": config_to_dict(policy.config),
-            "normalizers": normalizers_to_json(policy.normalizers),
-            "dataset": dataset_meta or {},
-            "training": training or {},
-            "weights": {"file": WEIGHTS_FILE, "sha256": _sha256(weights), "n_tensors": len(tensors),
-                        "dtype": "float16" if half else "float32",
-                        "n_parameters": int(sum(p.numel() for p in policy.parameters()))},
-            "coursekit_version": coursekit.__version__,
-        }
-        info["weights"]["config_sha256"] = _config_digest(info)
+        write_safetensors(tensors, weights, {"format": FORMAT, "policy_type": policy.policy_type,
+                                              "config_sha256": digest})
+        info["weights"] = {"file": WEIGHTS_FILE, "sha256": file_sha256(weights), "n_tensors": len(tensors),
+                           "dtype": "float16" if half else "float32",
+                           "n_parameters": int(sum(p.numel() for p in policy.parameters())), "config_sha256": digest}
         (tmp / CONFIG_FILE).write_text(json.dumps(info, indent=1, sort_keys=True) + "\n")
         umask = os.umask(0)
         os.umask(umask)
@@ -227,7 +200,22 @@ def read_checkpoint_info(path: str | os.PathLike) -> dict[str, Any]:
     for key in ("policy_type", "config", "normalizers", "weights"):
         if key not in info:
             raise CheckpointError(f"{str(cfg)!r} lacks the {key!r} entry")
+    for key, kind in _ENTRY_TYPES.items():
+        if (key in info or key not in _OPTIONAL) and not isinstance(info.get(key), kind):
+            raise CheckpointError(f"{str(cfg)!r}: {key!r} must be a JSON {_JSON_NAME[kind]}, got {_short(info.get(key))} "
+                                  f"({type(info.get(key)).__name__}); the checkpoint is corrupt or hand-edited")
     return info
+
+
+# config.json's entries and the JSON type each must have (dataset and training may be absent)
+_ENTRY_TYPES = {"policy_type": str, "config": dict, "normalizers": dict, "weights": dict, "dataset": dict, "training": dict}
+_OPTIONAL = ("dataset", "training")
+_JSON_NAME = {str: "string", dict: "object"}
+
+
+def _short(value: Any, limit: int = 60) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit] + "..."
 
 
 def training_budget(info: dict[str, Any] | str | os.PathLike) -> dict[str, Any]:
@@ -265,7 +253,7 @@ def load_checkpoint(path: str | os.PathLike, device: Any = "auto", expected_type
         device: "auto", "cpu", "cuda", ... (``coursekit.device.resolve_device``).
         expected_type: if given, the checkpoint's policy_type must equal it.
     """
-    from safetensors import SafetensorError
+    from safetensors import SafetensorError, safe_open
     from safetensors.torch import load_file
 
     from coursekit.config import config_from_dict
@@ -293,20 +281,25 @@ def load_checkpoint(path: str | os.PathLike, device: Any = "auto", expected_type
         raise CheckpointError(f"checkpoint {str(path)!r}: weights.file must name a file inside the checkpoint "
                               f"directory (like {WEIGHTS_FILE!r}), got {name!r}")
     bound = entry.get("config_sha256")
-    if bound is not None and bound != _config_digest(info):
+    if bound is not None and bound != config_digest(info):
         raise CheckpointError(f"checkpoint {str(path)!r}: config.json's policy_type/config/normalizers differ from those "
                               f"the weights were saved with (config_sha256 mismatch): edited or from another checkpoint")
     weights = path / name
     if weights.is_symlink() or not weights.is_file():
         raise FileNotFoundError(f"checkpoint {str(path)!r} has no weights file {name!r} (a regular file, not a link)")
-    digest = _sha256(weights)
+    digest = file_sha256(weights)
     if digest != entry.get("sha256"):
         raise CheckpointError(f"{str(weights)!r} does not match config.json (sha256 {digest[:12]}... vs "
                               f"{str(entry.get('sha256'))[:12]}...): truncated, corrupt or from another checkpoint")
     try:
         tensors = load_file(str(weights))
+        saved_with = safe_open(str(weights), framework="pt").metadata() or {}
     except (SafetensorError, OSError, ValueError) as exc:
         raise CheckpointError(f"{str(weights)!r} cannot be read as safetensors ({exc})") from exc
+    try:
+        check_weights_binding(info, saved_with, str(weights))
+    except ValueError as exc:
+        raise CheckpointError(str(exc)) from None
     policy = cls(config, normalizers)
     expected = policy.state_dict()
     missing, unexpected = sorted(set(expected) - set(tensors)), sorted(set(tensors) - set(expected))

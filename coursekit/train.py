@@ -49,7 +49,7 @@ class TrainConfig:
     warmup_steps: int = 500
     """Linear warm-up length in optimiser steps (LR stepped per batch)."""
     batch_size: int = 256
-    """Samples per optimiser step (used by the caller's batcher; recorded in the summary)."""
+    """Samples per optimiser step asked of the caller's batcher (the summary counts the rows it gave)."""
     max_steps: int | None = None
     """Stop after this many optimiser steps (None: time budget only)."""
     minutes: float | None = None
@@ -207,6 +207,12 @@ def _notify(callbacks: Sequence[Any], method: str, *args: Any) -> None:
             fn(*args)
 
 
+def _batch_rows(batch: Any, default: int) -> int:
+    """Samples in one batch: the rows of its "action" (B, Tp, Da) (the batch contract), else ``default``."""
+    action = batch.get("action") if isinstance(batch, Mapping) else None
+    return int(action.shape[0]) if hasattr(action, "shape") and len(action.shape) else default
+
+
 def train(policy: Any, batches: Iterable[dict[str, Any]], config: TrainConfig, *,
           callbacks: Sequence[TrainCallback] = (), init_from: dict[str, Any] | None = None) -> TrainResult:
     """Train ``policy`` in place on ``batches`` (an endless iterable of batch dicts) under ``config``.
@@ -233,6 +239,7 @@ def train(policy: Any, batches: Iterable[dict[str, Any]], config: TrainConfig, *
     history: list[dict[str, float]] = []
     sums: dict[str, float] = {}
     step, n_logged, last_loss = 0, 0, float("nan")
+    samples, logged_samples = 0, 0  # rows actually trained on (a batcher cuts a batch to the data it has)
     start = last_ckpt = last_log_t = time.perf_counter()
     warm_end_t: float | None = None
     bar_total = config.max_steps if config.max_steps is not None else int(budget_s)
@@ -240,8 +247,8 @@ def train(policy: Any, batches: Iterable[dict[str, Any]], config: TrainConfig, *
                desc=f"train {getattr(policy, 'policy_type', '')}".strip(), dynamic_ncols=True)
 
     def summary(seconds: float) -> dict[str, Any]:
-        return {"steps": step, "samples": step * config.batch_size, "seconds": round(seconds, 2),
-                "samples_per_s": round(step * config.batch_size / max(seconds, 1e-9), 1),
+        return {"steps": step, "samples": samples, "seconds": round(seconds, 2),
+                "samples_per_s": round(samples / max(seconds, 1e-9), 1),
                 "final_loss": last_loss, "ema_decay": ema.decay if ema else None,
                 "train_config": config_to_dict(config), "torch_threads": threads_used,
                 "loss_curve": [[h["step"], round(h["seconds"], 1), round(h["loss"], 5)] for h in history],
@@ -270,7 +277,8 @@ def train(policy: Any, batches: Iterable[dict[str, Any]], config: TrainConfig, *
             for g, base in zip(optimizer.param_groups, base_lrs):
                 g["lr"] = base * factor
 
-            out = policy.compute_loss(next(batch_iter))
+            batch = next(batch_iter)
+            out = policy.compute_loss(batch)
             loss = out["loss"]
             if not torch.isfinite(loss):
                 raise ValueError(f"training loss became {loss.item()} at step {step}; check the data and the LR ({config.lr})")
@@ -282,6 +290,8 @@ def train(policy: Any, batches: Iterable[dict[str, Any]], config: TrainConfig, *
             if ema is not None:
                 ema.update(policy, step)
             step += 1
+            rows = _batch_rows(batch, config.batch_size)
+            samples, logged_samples = samples + rows, logged_samples + rows
             last_loss = float(loss.detach())
             for k, v in out.items():
                 sums[k] = sums.get(k, 0.0) + float(v.detach() if torch.is_tensor(v) else v)
@@ -290,10 +300,10 @@ def train(policy: Any, batches: Iterable[dict[str, Any]], config: TrainConfig, *
             now = time.perf_counter()
             if step % config.log_every == 0 or (config.max_steps is not None and step == config.max_steps):
                 row = {"step": step, "seconds": round(now - start, 3), "lr": base_lrs[0] * factor,
-                       "samples_per_s": n_logged * config.batch_size / max(now - last_log_t, 1e-9),
+                       "samples_per_s": logged_samples / max(now - last_log_t, 1e-9),
                        **{k: v / n_logged for k, v in sums.items()}}
                 history.append(row)
-                sums, n_logged, last_log_t = {}, 0, now
+                sums, n_logged, logged_samples, last_log_t = {}, 0, 0, now
                 bar.set_postfix(loss=f"{row['loss']:.4f}", lr=f"{row['lr']:.1e}", sps=f"{row['samples_per_s']:.0f}")
                 _notify(callbacks, "on_log", {"step": step, "loss": row["loss"], "lr": row["lr"],
                                               "samples_per_s": row["samples_per_s"], "wall_s": row["seconds"]})
@@ -310,6 +320,9 @@ def train(policy: Any, batches: Iterable[dict[str, Any]], config: TrainConfig, *
             torch.set_num_threads(threads_before)
 
     seconds = time.perf_counter() - start
+    if step == 0:  # never hand an untrained policy to the checkpoint writer as if it were trained
+        raise ValueError(f"the budget ended before the first optimiser step (minutes={config.minutes!r}); nothing was "
+                         f"trained, so no checkpoint is written: give a budget of at least one step")
     final = ema.model if ema else policy
     final.eval()
     result = TrainResult(policy=final, raw_policy=policy, history=history,

@@ -11,6 +11,7 @@ import dataclasses
 import hashlib
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -21,12 +22,13 @@ import torch
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from coursekit.checkpoint import CheckpointError, _sha256, load_checkpoint, save_checkpoint
+from coursekit.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from coursekit.config import config_from_dict, config_to_dict
 from coursekit.data import MinMaxNormalizer
 from coursekit.nn.unet1d import UNet1DConfig
 from coursekit.policies.act import ACTConfig
 from coursekit.policies.diffusion import DiffusionPolicy, DiffusionPolicyConfig
+from coursekit.weights_file import config_digest, file_sha256
 
 ROOT = Path(__file__).resolve().parent.parent
 TINY = UNet1DConfig(down_dims=(16, 32), kernel_size=3, n_groups=4, diffusion_step_embed_dim=16)
@@ -204,7 +206,7 @@ def test_identical_policies_give_identical_weight_bytes_in_any_process(tmp_path)
     assert len(files) == 6
     assert len({hashlib.sha256(f.read_bytes()).hexdigest() for f in files}) == 1
     recorded = {json.loads((f.parent / "config.json").read_text())["weights"]["sha256"] for f in files}
-    assert recorded == {_sha256(files[0])}
+    assert recorded == {file_sha256(files[0])}
     raw = files[0].read_bytes()
     header = json.loads(raw[8:8 + int.from_bytes(raw[:8], "little")])
     assert list(header["__metadata__"]) == sorted(header["__metadata__"])
@@ -262,3 +264,160 @@ def test_num_inference_steps_none_means_the_samplers_own_default():
             DiffusionPolicyConfig(unet=TINY, num_inference_steps=bad)
     with pytest.raises(ValueError, match="got True"):
         DiffusionPolicyConfig(unet=TINY, num_inference_steps=True)
+
+
+# ---- the weights carry the policy type and config digest they were saved with ------------------
+
+def _three_heads(root: Path) -> dict[str, Path]:
+    """Tiny diffusion, flow and regression checkpoints: the same U-Net, so the same tensor names and shapes."""
+    from coursekit.policies.flow import FlowMatchingPolicy, FlowMatchingPolicyConfig
+    from coursekit.policies.regression import RegressionPolicy, RegressionPolicyConfig
+
+    torch.manual_seed(0)
+    policies = {"diffusion": DiffusionPolicy(DiffusionPolicyConfig(unet=TINY), NORMS),
+                "flow": FlowMatchingPolicy(FlowMatchingPolicyConfig(unet=TINY), NORMS),
+                "regression": RegressionPolicy(RegressionPolicyConfig(unet=TINY), NORMS),
+                "diffusion_tp32": DiffusionPolicy(DiffusionPolicyConfig(unet=TINY, horizon=32), NORMS)}
+    return {name: save_checkpoint(p, root / name) for name, p in policies.items()}
+
+
+def _rebind(path: Path) -> None:
+    """What a careful forger does to config.json: recompute both the weights' sha256 and the config digest."""
+    info = json.loads((path / "config.json").read_text())
+    info["weights"]["sha256"] = file_sha256(path / "model.safetensors")
+    info["weights"]["config_sha256"] = config_digest(info)
+    (path / "config.json").write_text(json.dumps(info))
+
+
+def _as_older_weights(path: Path) -> None:
+    """The weights as coursekit wrote them before the digest went into their metadata (like the shipped ones):
+    the same tensors, metadata {format, policy_type}; config.json's sha256 follows."""
+    from safetensors.torch import load_file, save_file
+
+    w = path / "model.safetensors"
+    ptype = json.loads((path / "config.json").read_text())["policy_type"]
+    save_file(load_file(str(w)), str(w), metadata={"format": "coursekit-checkpoint", "policy_type": ptype})
+    info = json.loads((path / "config.json").read_text())
+    info["weights"]["sha256"] = file_sha256(w)
+    (path / "config.json").write_text(json.dumps(info))
+
+
+@pytest.mark.parametrize("older", [False, True], ids=["weights-with-digest", "older-weights"])
+def test_weights_swapped_between_heads_are_refused_even_with_every_sha_updated(tmp_path, older):
+    ckpts = _three_heads(tmp_path)
+    if older:
+        for path in ckpts.values():
+            _as_older_weights(path)
+    for target in ("diffusion", "flow", "regression"):
+        for source in ("diffusion", "flow", "regression"):
+            if source == target:
+                continue
+            dest = tmp_path / f"{source}_into_{target}"
+            shutil.copytree(ckpts[target], dest)
+            shutil.copy(ckpts[source] / "model.safetensors", dest / "model.safetensors")
+            _rebind(dest)
+            with pytest.raises(CheckpointError, match=f"holds the weights of a '{source}' policy but config.json says "
+                                                      f"'{target}'"):
+                load_checkpoint(dest, device="cpu")
+
+
+def test_weights_of_another_config_of_the_same_head_are_refused(tmp_path):
+    ckpts = _three_heads(tmp_path)
+    shutil.copy(ckpts["diffusion_tp32"] / "model.safetensors", ckpts["diffusion"] / "model.safetensors")
+    _rebind(ckpts["diffusion"])  # Tp does not change a U-Net tensor: only the digest can tell
+    with pytest.raises(CheckpointError, match="was saved with another policy_type/config/normalizers"):
+        load_checkpoint(ckpts["diffusion"], device="cpu")
+
+
+@pytest.mark.parametrize("older", [False, True], ids=["weights-with-digest", "older-weights"])
+def test_deleting_config_sha256_does_not_let_an_edit_through(tmp_path, older):
+    path = _three_heads(tmp_path)["diffusion"]
+    if older:
+        _as_older_weights(path)
+    info = json.loads((path / "config.json").read_text())
+    del info["weights"]["config_sha256"]
+    info["config"]["horizon"] = 32
+    (path / "config.json").write_text(json.dumps(info))
+    match = "lacks weights.config_sha256" if older else "was saved with another policy_type/config/normalizers"
+    with pytest.raises(CheckpointError, match=match):
+        load_checkpoint(path, device="cpu")
+    info["config"]["horizon"] = 16  # the deletion alone: still verifiable from the weights' own metadata
+    (path / "config.json").write_text(json.dumps(info))
+    if older:
+        with pytest.raises(CheckpointError, match="lacks weights.config_sha256"):
+            load_checkpoint(path, device="cpu")
+    else:
+        assert load_checkpoint(path, device="cpu").config.horizon == 16
+
+
+def test_weights_without_coursekit_metadata_are_refused(tmp_path):
+    from safetensors.torch import load_file, save_file
+
+    path = _three_heads(tmp_path)["diffusion"]
+    save_file(load_file(str(path / "model.safetensors")), str(path / "model.safetensors"))  # a plain safetensors file
+    _rebind(path)
+    with pytest.raises(CheckpointError, match="carries no coursekit metadata"):
+        load_checkpoint(path, device="cpu")
+
+
+def test_new_weights_carry_type_and_digest_in_their_metadata(tmp_path):
+    from safetensors import safe_open
+
+    for name, path in _three_heads(tmp_path).items():
+        info = json.loads((path / "config.json").read_text())
+        meta = safe_open(str(path / "model.safetensors"), framework="pt").metadata()
+        assert meta == {"format": "coursekit-checkpoint", "policy_type": info["policy_type"],
+                        "config_sha256": config_digest(info)} == {**meta, "config_sha256": info["weights"]["config_sha256"]}, name
+
+
+# ---- any hand edit of config.json: refused in one line naming the entry, or harmless ---------------
+
+def _json_paths(d: dict, prefix: tuple = ()) -> list[tuple]:
+    out = []
+    for k, v in d.items():
+        out.append(prefix + (k,))
+        if isinstance(v, dict):
+            out += _json_paths(v, prefix + (k,))
+    return out
+
+
+json_junk = st.recursive(st.none() | st.booleans() | st.integers(-3, 10**20) | st.floats(allow_nan=False, allow_infinity=False)
+                         | st.text(max_size=6), lambda c: st.lists(c, max_size=3) | st.dictionaries(st.text(max_size=4), c, max_size=3),
+                         max_leaves=5)
+
+
+@pytest.fixture(scope="module")
+def pusht_ckpt(tmp_path_factory):
+    torch.manual_seed(0)
+    policy = DiffusionPolicy(DiffusionPolicyConfig(unet=TINY, num_inference_steps=2), NORMS)
+    return save_checkpoint(policy, tmp_path_factory.mktemp("ck") / "ckpt",
+                           dataset_meta={"env_id": "coursekit/PushT-v0", "episode_seeds": [0, 1]}, training={"steps": 3})
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_any_edit_of_config_json_is_one_clear_line_or_harmless(pusht_ckpt, tmp_path_factory, data, capsys):
+    from coursekit.cli import main
+
+    info = json.loads((pusht_ckpt / "config.json").read_text())
+    path = data.draw(st.sampled_from(_json_paths(info)))
+    bad = json.loads(json.dumps(info))
+    dropped = data.draw(st.booleans())
+    if dropped:
+        _drop(bad, path)
+    else:
+        _set(bad, path, data.draw(json_junk))
+    work = tmp_path_factory.mktemp("edit") / "ckpt"
+    shutil.copytree(pusht_ckpt, work)
+    (work / "config.json").write_text(json.dumps(bad))
+    before = {p.name: p.read_bytes() for p in work.iterdir()}
+    capsys.readouterr()
+    rc = main(["eval", str(work), "--episodes", "1", "--max-steps", "1", "--no-progress"])
+    err = capsys.readouterr().err
+    assert rc in (0, 2), err
+    if rc == 2:  # one line from the checkpoint's checks, never the catch-all for an unexpected exception
+        assert err.count("\n") == 1 and err.startswith("coursekit eval: error: ") and "--debug" not in err, err
+    elif path[0] in ("policy_type", "config", "normalizers") or path == ("weights", "sha256") or \
+            (path == ("weights", "file") and not dropped):  # (a missing weights.file means model.safetensors)
+        assert bad == info, f"an edit of {path} was accepted"
+    assert {p.name: p.read_bytes() for p in work.iterdir()} == before

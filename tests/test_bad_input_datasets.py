@@ -118,3 +118,69 @@ def test_the_issue_examples_each_give_one_clear_line(tmp_path):
     with pytest.raises(FileNotFoundError, match="dataset file not found") as info:
         EpisodeDataset.load(tmp_path / "missing.npz")
     _assert_clear_refusal(tmp_path / "missing.npz", info.value)
+
+
+# ---- demonstrations checked against the task they are to train (coursekit.data.validate) -----------
+
+def _task_data(lengths, task: str, action_width: int | None = None, seed: int = 0) -> EpisodeDataset:
+    """Valid demonstrations of ``task`` ('pusht': state (N, 5) + action (N, 2); 'aloha': qpos (N, 14),
+    env_state (N, 7), action (N, 14)), optionally with actions of another width."""
+    rng = np.random.default_rng(seed)
+    width = action_width or {"pusht": 2, "aloha": 14}[task]
+    eps = []
+    for n in lengths:
+        ep = ({"state": rng.uniform(50, 450, (n, 5))} if task == "pusht"
+              else {"qpos": rng.normal(size=(n, 14)), "env_state": rng.normal(size=(n, 7))})
+        eps.append({**ep, "action": rng.uniform(0, 512, (n, width))})
+    return EpisodeDataset.from_episodes(eps, {"env_id": task})
+
+
+@SETTINGS
+@given(lengths=st.lists(st.integers(1, 8), min_size=1, max_size=4), data=st.data(),
+       value=st.sampled_from([np.nan, np.inf, -np.inf]), task=st.sampled_from(["pusht", "aloha"]))
+def test_a_non_finite_value_is_reported_by_episode_step_and_column(lengths, data, value, task):
+    from coursekit.data.validate import check_training_data
+
+    ds = _task_data(lengths, task)
+    features = {"pusht": "pusht_state", "aloha": "aloha_state"}[task]
+    check_training_data(ds, features)  # valid: no error
+    key = data.draw(st.sampled_from(sorted(ds.arrays)))
+    episode = data.draw(st.integers(0, len(lengths) - 1))
+    step = data.draw(st.integers(0, lengths[episode] - 1))
+    column = data.draw(st.integers(0, ds[key].shape[1] - 1))
+    ds.arrays[key][int(ds.episode_starts[episode]) + step, column] = value
+    what = "NaN" if np.isnan(value) else "inf"
+    with pytest.raises(ValueError, match=rf"^--data 'd\.npz': the data contains {what} at episode {episode}, step {step} "
+                                         rf"of '{key}' \(column {column}\)$"):
+        check_training_data(ds, features, source="--data 'd.npz'")
+
+
+@SETTINGS
+@given(task=st.sampled_from(["pusht", "aloha"]), width=st.integers(1, 16),
+       dtype=st.sampled_from(["float32", "float64", "int64", "bool", "<U8"]))
+def test_actions_are_accepted_exactly_when_numeric_and_as_wide_as_the_task_takes(task, width, dtype):
+    from coursekit.data.validate import TASK_ACTION_DIM, check_training_data
+
+    ds = _task_data([3, 4], task, action_width=width)
+    ds.arrays["action"] = ds["action"].astype(dtype)
+    features = {"pusht": "pusht_state", "aloha": "aloha_state"}[task]
+    if width == TASK_ACTION_DIM[task] and dtype not in ("bool", "<U8"):
+        check_training_data(ds, features)
+        return
+    expected = (r"array 'action' must hold numbers, got dtype" if dtype in ("bool", "<U8")
+                else rf"'action' has shape \(7, {width}\), the {task} task takes actions of shape \(N, {TASK_ACTION_DIM[task]}\)")
+    with pytest.raises(ValueError, match=expected) as info:
+        check_training_data(ds, features)
+    assert "\n" not in str(info.value)
+
+
+def test_an_empty_data_set_or_another_tasks_arrays_are_refused_by_make_policy():
+    from coursekit.policies.factory import make_policy
+
+    empty = EpisodeDataset({"state": np.zeros((0, 5)), "action": np.zeros((0, 2))}, np.zeros(0, np.int64), {})
+    with pytest.raises(ValueError, match=r"^the dataset holds no episodes \(0 steps\): nothing to train on$"):
+        make_policy("diffusion", empty, features="pusht_state")
+    with pytest.raises(ValueError, match=r"lacks the array\(s\) \['state'\] that 'pusht_state' \(pusht task\) trains on"):
+        make_policy("diffusion", _task_data([5], "aloha"), features="pusht_state")
+    with pytest.raises(ValueError, match=r"'action' has shape \(10, 3\), the pusht task takes actions of shape \(N, 2\)"):
+        make_policy("regression", _task_data([4, 6], "pusht", action_width=3))

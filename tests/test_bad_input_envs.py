@@ -62,22 +62,50 @@ def _seed_ok(seed) -> bool:
     return seed is None or (isinstance(seed, int) and not isinstance(seed, bool) and 0 <= seed < 2**32)
 
 
+def _pusht_start_in_world(start) -> bool:
+    """Pusher and block (x, y) in [0, 512], |angle| <= 1000 rad, and the block's origin after the legacy reset
+    order, (bx + 45 sin a, by + 45 (1 - cos a)) in closed form (centre of gravity (0, 45)), in the world too."""
+    ax, ay, bx, by, a = start
+    origin = (bx + 45.0 * math.sin(a), by + 45.0 * (1.0 - math.cos(a))) if abs(a) <= 1000 else (-1.0, -1.0)
+    return all(0.0 <= v <= 512.0 for v in (ax, ay, bx, by, *origin))
+
+
+coordinates = st.one_of(st.floats(0, 512), st.floats(-1e13, 1e13), st.sampled_from([-1e-9, 512.000001, 1e12]))
+starts = st.tuples(coordinates, coordinates, coordinates, coordinates,
+                   st.one_of(st.floats(-7, 7), st.floats(-2000, 2000), st.just(1e12))).map(list)
+
+
 @SETTINGS
 @given(seed=seeds, options=st.one_of(st.none(), junk, st.lists(st.integers(), max_size=2),
                                      st.fixed_dictionaries({"reset_to_state": st.one_of(
-                                         st.lists(st.floats(40, 470), min_size=5, max_size=5), st.lists(floats, max_size=7), junk)}),
+                                         st.lists(st.floats(40, 470), min_size=5, max_size=5), starts,
+                                         st.lists(floats, max_size=7), junk)}),
                                      st.dictionaries(st.sampled_from(["reset_to_sate", "seed", "state"]), st.integers(),
                                                      min_size=1, max_size=2)))
 def test_pusht_reset_accepts_exactly_the_well_formed_arguments(pusht, seed, options):
     start = options.get("reset_to_state") if isinstance(options, dict) else None
     ok = (_seed_ok(seed) and (options is None or (isinstance(options, dict) and set(options) <= {"reset_to_state"}
-                                                  and (start is None or _well_formed(start, 5)))))
+                                                  and (start is None or (_well_formed(start, 5)
+                                                                         and _pusht_start_in_world(start))))))
     if ok:
         obs, info = pusht.reset(seed=seed, options=options)
         assert obs.shape == (5,) and 0.0 <= info["coverage"] <= 1.0
+        assert pusht.observation_space.contains(obs), obs  # the first observation lies in the env's own space
         return
     with pytest.raises(ValueError, match=r"^PushTEnv.reset: (seed|options|unknown option)|^options\['reset_to_state'\]"):
         pusht.reset(seed=seed, options=options)
+
+
+def test_pusht_reset_to_a_state_outside_the_world_is_refused_naming_the_value(pusht):
+    before = pusht.get_state()
+    with pytest.raises(ValueError, match=r"^options\['reset_to_state'\]: agent x must be in \[0, 512\] \(the world\), "
+                                         r"got 1000000000000\.0$"):
+        pusht.reset(options={"reset_to_state": [1e12] * 5})
+    with pytest.raises(ValueError, match=r"angle must be in \[-1000, 1000\] rad, got 1000000000000\.0"):
+        pusht.reset(options={"reset_to_state": [100, 100, 300, 300, 1e12]})
+    with pytest.raises(ValueError, match=r"would put the block's origin at \(500\.1, 590\.0\), outside the \[0, 512\] world"):
+        pusht.reset(options={"reset_to_state": [100, 100, 500, 500, 3.14]})
+    np.testing.assert_array_equal(pusht.get_state(), before)  # a refused reset changes nothing
 
 
 def test_the_issue_examples_give_one_clear_line(pusht):
@@ -117,17 +145,57 @@ def test_aloha_step_accepts_exactly_the_well_formed_actions(aloha, action):
         np.testing.assert_array_equal(after[key], before[key])
 
 
+TABLE = ((-0.8, 0.8), (0.1, 1.1), (0.0, 1.0))
+"""Where an object may be put (m): over the table box of assets/aloha_pair.xml (centre (0, 0.6, -0.02), half
+sizes (0.8, 0.5, 0.02)), up to 1 m above its top."""
+
+
+def _cube_pose_physical(state) -> bool:
+    norm = math.sqrt(sum(q * q for q in state[3:]))
+    return all(lo <= v <= hi for v, (lo, hi) in zip(state[:3], TABLE)) and abs(norm - 1.0) <= 0.01
+
+
+def _unit(q):
+    n = math.sqrt(sum(v * v for v in q))
+    return [v / n for v in q] if n > 1e-3 else [1.0, 0.0, 0.0, 0.0]
+
+
+cube_poses = st.tuples(st.floats(-0.9, 0.9), st.floats(0.0, 1.2), st.floats(-0.1, 1.1),
+                       st.lists(st.floats(-1, 1), min_size=4, max_size=4).map(_unit)).map(lambda t: [*t[:3], *t[3]])
+far_poses = st.lists(st.one_of(st.floats(-1e7, 1e7), st.just(1e6)), min_size=7, max_size=7)
+
+
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(seed=seeds, options=st.one_of(st.none(), junk, st.fixed_dictionaries({"env_state": st.one_of(
-    st.lists(floats, min_size=7, max_size=7), st.lists(floats, max_size=8), junk)}),
+    cube_poses, far_poses, st.lists(floats, min_size=7, max_size=7), st.lists(floats, max_size=8), junk)}),
     st.dictionaries(st.sampled_from(["reset_to_state", "envstate"]), st.integers(), min_size=1, max_size=2)))
 def test_aloha_reset_accepts_exactly_the_well_formed_arguments(aloha, seed, options):
     state = options.get("env_state") if isinstance(options, dict) else None
     ok = (_seed_ok(seed) and (options is None or (isinstance(options, dict) and set(options) <= {"env_state"}
-                                                  and (state is None or _well_formed(state, 7)))))
+                                                  and (state is None or (_well_formed(state, 7)
+                                                                         and _cube_pose_physical(state))))))
     if ok:
         obs, _ = aloha.reset(seed=seed, options=options)
         assert obs["qpos"].shape == (14,)
+        if state is not None:  # the cube is where it was asked to be (quaternion normalised)
+            np.testing.assert_allclose(obs["env_state"][:3], state[:3])
+            np.testing.assert_allclose(obs["env_state"][3:], np.array(state[3:]) / np.linalg.norm(state[3:]))
         return
     with pytest.raises(ValueError, match=r"^AlohaTransferCubeEnv.reset: (seed|options|unknown option)|^options\['env_state'\]"):
         aloha.reset(seed=seed, options=options)
+
+
+def test_aloha_far_or_degenerate_object_poses_are_refused_not_reported_as_success(aloha):
+    before = aloha.get_physics_state()
+    with pytest.raises(ValueError, match=r"^options\['env_state'\]: the cube at xyz \[1000000\.0, 1000000\.0, 1000000\.0\] m "
+                                         r"is outside the workspace over the table \(x in \[-0\.80, 0\.80\], y in \[0\.10, 1\.10\], "
+                                         r"z in \[0\.00, 1\.00\] m\)$"):
+        aloha.reset(options={"env_state": [1e6] * 7})
+    with pytest.raises(ValueError, match=r"the cube's orientation \[qw qx qy qz\] must be a unit quaternion .*\(norm 0\)"):
+        aloha.reset(options={"env_state": [0.1, 0.5, 0.02, 0.0, 0.0, 0.0, 0.0]})
+    after = aloha.get_physics_state()
+    for key in before:
+        np.testing.assert_array_equal(after[key], before[key])
+    _, info = aloha.reset(options={"env_state": [0.1, 0.5, 0.02, 1.0, 0.0, 0.0, 0.0]})  # the spawn pose: fine
+    assert not info["is_success"] and info["stage"] == 0
+

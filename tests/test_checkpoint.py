@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 import torch
 
-from coursekit.checkpoint import CheckpointError, _sha256, load_checkpoint, read_checkpoint_info, save_checkpoint
+from coursekit.checkpoint import CheckpointError, load_checkpoint, read_checkpoint_info, save_checkpoint
+from coursekit.weights_file import config_digest, file_sha256
 from coursekit.data import MinMaxNormalizer
 from coursekit.nn.unet1d import UNet1DConfig
 from coursekit.policies.diffusion import DiffusionPolicy, DiffusionPolicyConfig
@@ -44,7 +45,7 @@ def test_round_trip_gives_identical_predictions(saved):
     np.testing.assert_array_equal(loaded.normalizers["action"].low, NORMS["action"].low)
     info = read_checkpoint_info(path)
     assert info["policy_type"] == "diffusion" and info["training"]["steps"] == 7
-    assert info["dataset"]["n_episodes"] == 3 and info["weights"]["sha256"] == _sha256(path / "model.safetensors")
+    assert info["dataset"]["n_episodes"] == 3 and info["weights"]["sha256"] == file_sha256(path / "model.safetensors")
     assert sorted(p.name for p in path.iterdir()) == ["config.json", "model.safetensors"]
     umask = os.umask(0)
     os.umask(umask)
@@ -82,12 +83,10 @@ def test_half_precision_storage_loads_into_float32(saved, tmp_path):
 
 def _edit_config(path, fn):
     """Edit config.json as a deliberate, consistent edit would (re-binding the config digest)."""
-    from coursekit.checkpoint import _config_digest
-
     info = json.loads((path / "config.json").read_text())
     fn(info)
     if {"policy_type", "config", "normalizers"} <= set(info) and isinstance(info.get("weights"), dict):
-        info["weights"]["config_sha256"] = _config_digest(info)
+        info["weights"]["config_sha256"] = config_digest(info)
     (path / "config.json").write_text(json.dumps(info))
 
 
@@ -97,7 +96,7 @@ def test_refuses_truncated_weights(saved):
     w.write_bytes(w.read_bytes()[:-100])
     with pytest.raises(CheckpointError, match="sha256"):
         load_checkpoint(path, device="cpu")
-    _edit_config(path, lambda i: i["weights"].update(sha256=_sha256(w)))  # even with a matching hash
+    _edit_config(path, lambda i: i["weights"].update(sha256=file_sha256(w)))  # even with a matching hash
     with pytest.raises(CheckpointError, match="safetensors"):
         load_checkpoint(path, device="cpu")
 
@@ -106,13 +105,33 @@ def test_never_unpickles(saved):
     policy, path = saved
     w = path / "model.safetensors"
     w.write_bytes(pickle.dumps(policy.state_dict()))
-    _edit_config(path, lambda i: i["weights"].update(sha256=_sha256(w)))
+    _edit_config(path, lambda i: i["weights"].update(sha256=file_sha256(w)))
     with pytest.raises(CheckpointError, match="safetensors"):
+        load_checkpoint(path, device="cpu")
+
+
+def _as_older_checkpoint(path):
+    """Rewrite the weights as coursekit wrote them before the config digest went into their metadata
+    (same tensors, metadata {format, policy_type} only), like the shipped checkpoints."""
+    from safetensors.torch import load_file, save_file
+
+    w = path / "model.safetensors"
+    save_file(load_file(str(w)), str(w), metadata={"format": "coursekit-checkpoint", "policy_type": "diffusion"})
+    _edit_config(path, lambda i: i["weights"].update(sha256=file_sha256(w)))
+
+
+def test_a_consistent_edit_of_config_json_is_refused_by_the_weights_metadata(saved):
+    _, path = saved
+    _edit_config(path, lambda i: i["config"].update(horizon=32))  # digest in config.json re-bound, weights' not
+    with pytest.raises(CheckpointError, match="was saved with another policy_type/config/normalizers"):
         load_checkpoint(path, device="cpu")
 
 
 def test_refuses_shape_mismatch(saved):
     _, path = saved
+    _as_older_checkpoint(path)
+    assert torch.equal(next(iter(load_checkpoint(path, device="cpu").state_dict().values())),
+                       next(iter(saved[0].state_dict().values())))  # an older checkpoint still loads
     _edit_config(path, lambda i: i["config"]["unet"].update(down_dims=[16, 64]))
     with pytest.raises(CheckpointError, match="has shape"):
         load_checkpoint(path, device="cpu")

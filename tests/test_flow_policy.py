@@ -78,14 +78,20 @@ def test_bad_arguments_name_the_value():
         FlowMatchingPolicyConfig(time_sampling="gamma")
     with pytest.raises(ValueError, match="'rk4'"):
         FlowMatchingPolicyConfig(integration_method="rk4")
-    with pytest.raises(ValueError, match="num_inference_steps must be a positive int, got 0"):
-        FlowMatchingPolicyConfig(num_inference_steps=0)
+    for bad in (0, 1001, True, 99999999999999999999):  # unbounded N would integrate forever
+        with pytest.raises(ValueError, match=rf"num_inference_steps must be an int in \[1, 1000\] for a flow policy, got {bad}"):
+            FlowMatchingPolicyConfig(num_inference_steps=bad)
     policy = tiny()
     obs = np.zeros((1, 2, 6), dtype=np.float32)
     with pytest.raises(ValueError, match="'ddim'"):
         policy.predict_chunk(obs, sampler="ddim")
     with pytest.raises(ValueError, match="not both"):
         policy.predict_chunk(obs, steps=2, num_inference_steps=3)
+    for bad in (0, 1001, 10**20):  # an explicit 0 is refused, never replaced by the config's 10
+        with pytest.raises(ValueError, match=f"got {bad}"):
+            policy.predict_chunk(obs, steps=bad)
+        with pytest.raises(ValueError, match=f"got {bad}"):
+            policy.describe_sampling(num_inference_steps=bad)
 
 
 def test_learns_two_modes_that_regression_would_average():

@@ -116,7 +116,7 @@ def test_training_is_deterministic_by_seed():
     assert torch.equal(w[0], w[1]) and not torch.equal(w[0], w[2])
     assert [h["loss"] for h in runs[0].history] == [h["loss"] for h in runs[1].history]
     s = runs[0].summary
-    assert s["steps"] == 12 and s["samples"] == 12 * 256 and s["complete"]
+    assert s["steps"] == 12 and s["samples"] == 12 * 16 and s["complete"]  # the rows trained on, not TrainConfig's 256
     # EMA weights differ from the raw ones and are what the result hands back
     raw = torch.cat([p.flatten() for p in runs[0].raw_policy.parameters()])
     assert not torch.equal(raw, w[0]) and not runs[0].policy.training
@@ -135,6 +135,16 @@ def test_time_budget_stops_the_run_and_checkpoints(tmp_path):
     info = json.loads((tmp_path / "ckpt" / "config.json").read_text())
     assert info["training"]["steps"] == result.summary["steps"] and info["dataset"]["env_id"] == "synthetic"
     assert result.policy is policy  # no EMA: the trained policy itself
+
+
+def test_a_budget_that_ends_before_the_first_step_writes_no_checkpoint(tmp_path):
+    policy, batches, _ = make_policy("regression", synthetic_pusht(), batch_size=8, unet=TINY)
+    from coursekit.checkpoint import CheckpointSaver
+
+    cfg = TrainConfig(minutes=1e-300, warmup_steps=0, progress=False, ema=False)
+    with pytest.raises(ValueError, match="the budget ended before the first optimiser step"):
+        train(policy, batches, cfg, callbacks=[CheckpointSaver(tmp_path / "ckpt")])
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_named_recipes():

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import re
 from collections.abc import Callable
 from pathlib import Path
@@ -48,12 +49,17 @@ def float_in(lo: float | None = None, hi: float | None = None, lo_open: bool = F
 
 def _range(lo, hi, lo_open: bool = False) -> str:
     if lo is not None and hi is not None:
-        return f" in {'(' if lo_open else '['}{lo:g}, {hi:g}]"
+        return f" in {'(' if lo_open else '['}{_num(lo)}, {_num(hi)}]"
     if lo is not None:
-        return f" {'>' if lo_open else '>='} {lo:g}"
+        return f" {'>' if lo_open else '>='} {_num(lo)}"
     if hi is not None:
-        return f" <= {hi:g}"
+        return f" <= {_num(hi)}"
     return ""
+
+
+def _num(value: float) -> str:
+    """An integer bound in full (4294967295, not 4.29497e+09); a float one as short as it is exact."""
+    return str(value) if isinstance(value, int) else f"{value:g}"
 
 
 positive_int = int_in(1)
@@ -72,15 +78,38 @@ def device(text: str) -> str:
     return text
 
 
-def positive_int_list(text: str) -> tuple[int, ...]:
-    """An argparse type: comma-separated positive integers, e.g. 32,64,128."""
+def int_list_in(lo: int, hi: int, max_len: int) -> Callable[[str], tuple[int, ...]]:
+    """An argparse type: 1 to ``max_len`` comma-separated integers, each in [lo, hi], e.g. 32,64,128."""
+    def parse(text: str) -> tuple[int, ...]:
+        try:
+            values = tuple(int(v) for v in text.split(","))
+        except ValueError:
+            values = ()
+        if not 1 <= len(values) <= max_len or any(not lo <= v <= hi for v in values):
+            raise argparse.ArgumentTypeError(f"must be 1 to {max_len} comma-separated integers in [{lo}, {hi}] like "
+                                             f"32,64,128, got {text!r}")
+        return values
+    parse.__name__ = "list of integers"
+    return parse
+
+
+def usable_cpus() -> int:
+    """CPUs this process may run on (its affinity mask where the OS has one, else all of them)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
+def threads(text: str) -> int:
+    """An argparse type: torch CPU threads, 1 to the CPUs this process may use (more only slows it down)."""
+    n = usable_cpus()
     try:
-        values = tuple(int(v) for v in text.split(","))
+        value = int(text)
     except ValueError:
-        values = ()
-    if not values or any(v < 1 for v in values):
-        raise argparse.ArgumentTypeError(f"must be comma-separated positive integers like 32,64,128, got {text!r}")
-    return values
+        value = 0
+    if not 1 <= value <= n:
+        raise argparse.ArgumentTypeError(f"must be an integer in [1, {n}] (the CPUs this process may use), got {text!r}")
+    return value
 
 
 def output_path(text: str) -> Path:

@@ -7,18 +7,20 @@ import sys
 import time
 from pathlib import Path
 
-from coursekit.commands._args import MAX_SEED, output_path, positive_int, seed_int
+from coursekit.commands._args import MAX_SEED, int_in, output_path, seed_int
 from coursekit.tasks.registry import TASKS, get_task, task_names  # plain data: `coursekit --help` stays instant
 
 HELP = f"generate scripted demonstrations of a task ({', '.join(task_names())}) into a dataset file"
+MAX_EPISODES = 100_000
+"""More demonstrations cannot be meant: the experts run ~2 PushT episodes/s, so 100000 is already a day's work."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     with_expert = [t for t in TASKS.values() if t.expert is not None]
     parser.add_argument("task", choices=[n for n in task_names(aliases=True) if get_task(n).expert is not None],
                         help="which task's scripted expert to run (a task name or an alias such as aloha-cube)")
-    parser.add_argument("--episodes", type=positive_int, default=None,
-                        help="number of demonstrations (default: " + ", ".join(
+    parser.add_argument("--episodes", type=int_in(1, MAX_EPISODES), default=None,
+                        help=f"number of demonstrations, at most {MAX_EPISODES} (default: " + ", ".join(
                             f"{t.demo_episodes} {t.name}" for t in with_expert) + ")")
     parser.add_argument("--seed", type=seed_int, default=0, help="seed of the first episode; episode i uses seed + i")
     parser.add_argument("--out", type=output_path, default=None, help="output .npz (default: outputs/data/<task>_<episodes>ep_seed<seed>[_noise<levels>][_person].npz)")

@@ -17,38 +17,47 @@ import json
 from pathlib import Path
 from typing import Any
 
-from coursekit.commands._args import MAX_SEED, device, nonnegative_float, output_path, positive_int, seed_int
+from coursekit.commands._args import MAX_SEED, device, int_in, nonnegative_float, output_path, seed_int, threads
 from coursekit.tasks.registry import TASKS  # plain data: `coursekit --help` stays instant
 
 HELP = "evaluate a policy checkpoint on held-out seeds (PushT score/success, ALOHA stages/strict success)"
 
+MAX_EPISODES = 1000
+"""Episodes run in lock-step, one environment each; more at once cannot be meant (use several --seed-start)."""
+MAX_EPISODE_STEPS = 10_000
+"""Step limit per episode: the protocols use 300 (PushT) and 400 (arm pair)."""
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("checkpoint", type=Path, help="checkpoint directory (from `coursekit train`)")
-    parser.add_argument("--episodes", type=positive_int, default=50, help="held-out episodes (default 50)")
+    parser.add_argument("--episodes", type=int_in(1, MAX_EPISODES), default=50,
+                        help=f"held-out episodes, at most {MAX_EPISODES} (default 50)")
     parser.add_argument("--seed-start", type=seed_int, default=None, help="first reset seed (default 100000; episode i uses start + i)")
     protocol = ", ".join(f"{t.max_steps} {t.name}" for t in TASKS.values())
-    parser.add_argument("--max-steps", type=positive_int, default=None,
+    parser.add_argument("--max-steps", type=int_in(1, MAX_EPISODE_STEPS), default=None,
                         help=f"steps per episode (default: the task's protocol, {protocol})")
     parser.add_argument("--sampler", choices=["ddim", "ddpm", "euler", "midpoint"], default=None,
                         help="sampler (default: the checkpoint's): ddim/ddpm for diffusion, euler/midpoint for flow")
-    parser.add_argument("--steps", type=positive_int, default=None,
-                        help="denoising / integration steps (default: 10 for DDIM and flow, 100 for DDPM)")
+    parser.add_argument("--steps", type=int_in(1), default=None,
+                        help="denoising / integration steps (default: 10 for DDIM and flow, 100 for DDPM; at most "
+                             "the diffusion's T, or 1000 for flow)")
     parser.add_argument("--ddim-spacing", choices=["leading", "trailing"], default=None,
                         help="DDIM timesteps: leading (90, 80, ..., 0) or trailing (99, 89, ..., 9) (default: the checkpoint's)")
-    parser.add_argument("--n-action-steps", type=positive_int, default=None, help="override Ta, actions executed per chunk")
+    parser.add_argument("--n-action-steps", type=int_in(1), default=None,
+                        help="override Ta, actions executed per chunk (ACT: with --no-ensembling)")
     parser.add_argument("--no-ensembling", action="store_true",
                         help="ACT: execute chunks by receding horizon instead of temporal ensembling")
     parser.add_argument("--ensemble-decay", type=nonnegative_float, default=None, help="ACT: m in w_i = exp(-m i) (default: the checkpoint's)")
     parser.add_argument("--seed", type=seed_int, default=0, help="seed of the sampler noise (default 0)")
     parser.add_argument("--device", type=device, default="auto", help="auto, cpu, cuda, mps (default auto)")
-    parser.add_argument("--threads", type=positive_int, default=None, help="torch CPU threads (default: torch's choice)")
+    parser.add_argument("--threads", type=threads, default=None, help="torch CPU threads (default: torch's choice)")
     parser.add_argument("--json", type=output_path, default=None,
                         help="also write the summary to this JSON file (an earlier `coursekit eval` summary there is "
                              "replaced; any other file is refused)")
     parser.add_argument("--record", type=output_path, default=None,
                         help="write a meshcat HTML replay and a PNG grid of first/last frames to this new folder")
-    parser.add_argument("--record-episodes", type=positive_int, default=4, help="episodes to record with --record (default 4)")
+    parser.add_argument("--record-episodes", type=int_in(1, MAX_EPISODES), default=None,
+                        help="episodes to record with --record, at most --episodes (default 4, or --episodes if fewer)")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
@@ -102,6 +111,13 @@ def _claim_outputs(args: argparse.Namespace, stack: contextlib.ExitStack) -> dic
     return locks
 
 
+def _check_record_episodes(args: argparse.Namespace) -> None:
+    """--record-episodes records some of the evaluated episodes: it needs --record and at most --episodes."""
+    if args.record_episodes is not None and (args.record is None or args.record_episodes > args.episodes):
+        raise ValueError(f"--record-episodes {args.record_episodes} needs --record DIR and at most --episodes "
+                         f"({args.episodes})")
+
+
 def run(args: argparse.Namespace) -> int:
     with contextlib.ExitStack() as stack:
         locks = _claim_outputs(args, stack)
@@ -116,6 +132,8 @@ def _evaluate(args: argparse.Namespace, locks: dict[str, Any]) -> int:
     from coursekit.evaluate.result import EVAL_SEED_START, heldout_seeds
     from coursekit.evaluate.tasks import make_adapter, task_of
 
+    _check_record_episodes(args)
+    _check_outputs(args)
     if args.threads is not None:
         torch.set_num_threads(args.threads)
     info = read_checkpoint_info(args.checkpoint)
@@ -155,6 +173,10 @@ def _check_flags_apply(args: argparse.Namespace, policy: Any) -> None:
         if value not in (None, False) and field not in getattr(policy, kind, ()):
             raise ValueError(f"{flag}{'' if value is True else f' {value}'} does not apply to {str(args.checkpoint)!r}: "
                              f"it holds a {policy.policy_type!r} policy")
+    if args.n_action_steps is not None and getattr(policy.config, "temporal_ensembling", False) and not args.no_ensembling:
+        raise ValueError(f"--n-action-steps {args.n_action_steps} has no effect on {str(args.checkpoint)!r}: its "
+                         f"{policy.policy_type!r} policy executes by temporal ensembling (a new chunk every step); "
+                         f"add --no-ensembling to execute {args.n_action_steps} actions per chunk")
     sampling = {k: v for k, v in (("sampler", args.sampler), ("num_inference_steps", args.steps)) if v is not None}
     if sampling:
         try:
@@ -172,7 +194,7 @@ def _write_replay(args: argparse.Namespace, adapter: Any, result: Any, lock: Any
     scores, success = adapter.episode_scores(result)
     episodes = [EpisodeRecording(seed=result.seeds[i], states=states[i, : int(result.length[i]) + 1],
                                  score=float(scores[i]), success=bool(success[i]))
-                for i in range(min(args.record_episodes, len(result.seeds)))]
+                for i in range(min(args.record_episodes or 4, len(result.seeds)))]
     return write_replay(args.record, adapter.task, episodes, lock=lock)
 
 

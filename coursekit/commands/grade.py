@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from coursekit.commands._args import int_in, output_path, positive_float, positive_int
+from coursekit.commands._args import float_in, int_in, output_path
 
 HELP = "grade a folder of submissions (copies or zips of exercises/): class CSV, Gradescope JSON, feedback"
 
@@ -26,11 +26,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="replace an earlier `coursekit grade` output at --out (only if unchanged since it was written)")
     parser.add_argument("--exercise", action="append", default=None, metavar="ID",
                         help="grade only this exercise (repeatable; default: all registered)")
-    parser.add_argument("--jobs", type=positive_int, default=1, help="submissions graded in parallel (one subprocess each)")
-    parser.add_argument("--timeout", type=positive_float, default=120.0, help="wall-clock limit per student x exercise, seconds")
-    parser.add_argument("--test-timeout", type=positive_float, default=10.0, help="limit per test, seconds")
-    parser.add_argument("--memory-mb", type=int_in(256), default=2048, help="address-space cap per subprocess, MiB")
-    parser.add_argument("--disk-mb", type=positive_int, default=64, help="size of each worker's private tmpfs (with bubblewrap), MiB")
+    # bounded: a limit of 1e300 s is no limit (a hanging submission would hang the class), 1e9 jobs no plan
+    parser.add_argument("--jobs", type=int_in(1, 256), default=1, help="submissions graded in parallel (one subprocess each)")
+    parser.add_argument("--timeout", type=float_in(0.0, 3600.0, lo_open=True), default=120.0,
+                        help="wall-clock limit per student x exercise, seconds (at most 3600)")
+    parser.add_argument("--test-timeout", type=float_in(0.0, 3600.0, lo_open=True), default=10.0,
+                        help="limit per test, seconds (at most 3600)")
+    parser.add_argument("--memory-mb", type=int_in(256, 1 << 20), default=2048, help="address-space cap per subprocess, MiB")
+    parser.add_argument("--disk-mb", type=int_in(1, 1 << 16), default=64,
+                        help="size of each worker's private tmpfs (with bubblewrap), MiB")
     parser.add_argument("--hidden-tests", type=Path, default=None, metavar="DIR",
                         help="instructor-only tests (count for points; feedback shows name, points, pass/fail only)")
     parser.add_argument("--gradescope-autograder", type=output_path, default=None, metavar="ZIP",

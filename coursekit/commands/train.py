@@ -28,13 +28,19 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from coursekit.commands._args import (device, nonnegative_int, output_path, positive_float, positive_int,
-                                      positive_int_list, seed_int)
+from coursekit.commands._args import device, float_in, int_in, int_list_in, output_path, seed_int, threads
 
 from coursekit.data.features import FEATURES  # numpy only: `coursekit --help` stays instant
 from coursekit.policies import POLICY_TYPES  # the registry itself (no torch until a class is used)
 
 HELP = "train a chunk policy (diffusion, regression baseline or act) on PushT or arm-pair demonstrations"
+
+# Bounds of the numeric flags: beyond them a value cannot be meant (a budget of 1e-300 minutes trains
+# no step; 100000 U-Net channels or an ACT chunk of 1e6 actions cannot fit in memory).
+MIN_MINUTES, MAX_MINUTES = 0.01, 100_000.0
+MAX_STEPS = 1_000_000_000
+MAX_CHUNK_SIZE = 1000
+MAX_CHANNELS, MAX_LEVELS = 4096, 6
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -46,35 +52,42 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--overwrite", action="store_true",
                         help="replace an existing run at --out: the new run trains in a hidden folder beside it and "
                              "replaces the old one only when complete")
-    parser.add_argument("--minutes", type=positive_float, default=None, help="wall-clock training budget in minutes")
-    parser.add_argument("--steps", type=positive_int, default=None, help="optimiser steps (default: until --minutes is used up)")
+    parser.add_argument("--minutes", type=float_in(MIN_MINUTES, MAX_MINUTES), default=None,
+                        help=f"wall-clock training budget in minutes, {MIN_MINUTES:g} to {MAX_MINUTES:g}")
+    parser.add_argument("--steps", type=int_in(1, MAX_STEPS), default=None,
+                        help="optimiser steps (default: until --minutes is used up)")
     parser.add_argument("--features", choices=sorted(FEATURES), default=None,
                         help="observation features (default: from the data: pusht_state = agent xy, block xy, sin/cos "
                              "angle for PushT, aloha_state = qpos + object poses for the arm pair)")
-    parser.add_argument("--chunk-size", type=positive_int, default=None, help="k, actions per ACT chunk (default: ACTConfig's)")
+    parser.add_argument("--chunk-size", type=int_in(1, MAX_CHUNK_SIZE), default=None,
+                        help=f"k, actions per ACT chunk, at most {MAX_CHUNK_SIZE} and the longest episode (default: ACTConfig's)")
     parser.add_argument("--unet", default=None, help="U-Net size preset: cpu (default), paper_lowdim, paper_image")
-    parser.add_argument("--down-dims", type=positive_int_list, default=None, help="override the preset's U-Net channels, e.g. 32,64,128")
+    parser.add_argument("--down-dims", type=int_list_in(1, MAX_CHANNELS, MAX_LEVELS), default=None,
+                        help=f"override the preset's U-Net channels, e.g. 32,64,128 (each at most {MAX_CHANNELS})")
     parser.add_argument("--vision", default=None, help="image encoder preset for --features pusht_image: cpu (default), resnet18")
-    parser.add_argument("--n-action-steps", type=positive_int, default=None,
+    parser.add_argument("--n-action-steps", type=int_in(1, MAX_CHUNK_SIZE), default=None,
                         help="Ta, actions executed per chunk (default: the policy's, 8 for diffusion/regression)")
     parser.add_argument("--recipe", choices=["paper", "cpu"], default="paper",
                         help="paper (default): the paper's optimiser (DP lr 1e-4, batch 256; ACT lr 1e-5, batch 8); "
                              "cpu: tuned for a 20-30 minute CPU budget (DP lr 5e-4, batch 128; ACT lr 3e-4, batch 16)")
-    parser.add_argument("--batch-size", type=positive_int, default=None, help="batch size (default: the recipe's; 64 for images)")
-    parser.add_argument("--lr", type=positive_float, default=None, help="peak learning rate (default: the recipe's)")
-    parser.add_argument("--warmup-steps", type=nonnegative_int, default=None, help="linear LR warm-up steps (default: the recipe's)")
+    parser.add_argument("--batch-size", type=int_in(1), default=None,
+                        help="batch size, at most the training samples in --data (default: the recipe's; 64 for images)")
+    parser.add_argument("--lr", type=float_in(0.0, 1.0, lo_open=True), default=None, help="peak learning rate (default: the recipe's)")
+    parser.add_argument("--warmup-steps", type=int_in(0, MAX_STEPS), default=None,
+                        help="linear LR warm-up steps, at most --steps (default: the recipe's)")
     parser.add_argument("--lr-schedule", choices=["cosine", "constant"], default=None,
                         help="after warm-up: cosine decay to 0 over the budget or constant (default: the recipe's; "
                              "cosine, except ACT --recipe paper: constant)")
     parser.add_argument("--seed", type=seed_int, default=0, help="seed of weights, batches and noise (default 0)")
-    parser.add_argument("--threads", type=positive_int, default=None,
+    parser.add_argument("--threads", type=threads, default=None,
                         help="torch CPU threads (default: torch's choice; use 1 on a machine shared with other jobs)")
     parser.add_argument("--device", type=device, default="auto", help="auto, cpu, cuda, mps (default auto)")
     parser.add_argument("--init-from", type=Path, default=None,
                         help="warm start: begin from this checkpoint's weights (same policy type, config and data "
                              "normalisers) with a fresh optimiser and LR schedule; its training summary is kept as "
                              "training.init_from in the new checkpoint")
-    parser.add_argument("--checkpoint-every", type=positive_float, default=5.0, help="minutes between periodic checkpoints (default 5)")
+    parser.add_argument("--checkpoint-every", type=float_in(0.0, MAX_MINUTES, lo_open=True), default=5.0,
+                        help="minutes between periodic checkpoints (default 5)")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
@@ -103,6 +116,7 @@ def run(args: argparse.Namespace) -> int:
     """One flow for every policy type and task: claim the output, build, train with callbacks, report."""
     if args.minutes is None and args.steps is None:
         raise ValueError("give a budget: --minutes M and/or --steps N")
+    _check_budget(args)
     with claim_run_out(args) as lock:  # before any work: nothing is loaded, built or written yet
         for leftover in lock.swept:
             print(f"removed {str(leftover)!r}, left by an interrupted earlier run", file=sys.stderr)
@@ -126,6 +140,7 @@ def _train(args: argparse.Namespace, lock: Any) -> int:
     resolve_device(args.device)  # an unavailable device is refused before the data is read
     dataset = EpisodeDataset.load(args.data)
     features = args.features or default_features(dataset.arrays, dataset.meta)
+    check_against_data(args, dataset, features)
     if args.vision is not None and features != "pusht_image":
         raise ValueError(f"--vision {args.vision} applies to image features (--features pusht_image), not {features}")
     overrides = {"lr": args.lr, "batch_size": args.batch_size or (64 if features == "pusht_image" else None),
@@ -134,12 +149,14 @@ def _train(args: argparse.Namespace, lock: Any) -> int:
     policy, batches, recipe = make_policy(args.policy, dataset, features=features, recipe=args.recipe,
                                           batch_size=overrides.get("batch_size"), seed=args.seed, device=args.device,
                                           **fields)
+    _check_batch_size(args, len(batches))
     config = TrainConfig(**{**recipe, **overrides}, max_steps=args.steps, minutes=args.minutes, seed=args.seed,
                          num_threads=args.threads, checkpoint_every_minutes=args.checkpoint_every,
                          progress=not args.no_progress)
+    cut = f" (batch size {config.batch_size} cut to them)" if config.batch_size > len(batches) else ""
     meta = {**dataset.meta, "path": str(args.data), "n_steps": dataset.n_steps, "n_episodes": dataset.n_episodes}
     print(f"{args.policy} policy on {features}, {policy.num_parameters() / 1e6:.2f} M parameters, {len(batches)} "
-          f"training samples from {dataset.n_episodes} episodes; device {policy.device}")
+          f"training samples from {dataset.n_episodes} episodes{cut}; device {policy.device}")
     prior = warm_start(policy, args.init_from) if args.init_from is not None else None
     if prior is not None:
         print(f"warm start from {args.init_from} ({prior['steps']} steps, {prior['seconds']} s)")
@@ -210,3 +227,29 @@ def _check_flags_apply(args: argparse.Namespace, config_fields: set[str], fields
         raise ValueError(f"--n-action-steps {args.n_action_steps} does not apply to --policy {args.policy}: it executes "
                          f"by temporal ensembling (choose Ta when evaluating: coursekit eval CKPT --no-ensembling "
                          f"--n-action-steps N)")
+
+
+def _check_budget(args: argparse.Namespace) -> None:
+    """Refuse an explicit warm-up longer than the step budget: the LR would never reach its peak."""
+    if args.warmup_steps is not None and args.steps is not None and args.warmup_steps > args.steps:
+        raise ValueError(f"--warmup-steps {args.warmup_steps} is more than --steps {args.steps}: the learning rate "
+                         f"would never reach its peak; give at most {args.steps}")
+
+
+def check_against_data(args: argparse.Namespace, dataset: Any, features: str) -> None:
+    """Before building anything: the demonstrations fit the task, and --chunk-size fits their episodes."""
+    from coursekit.data.validate import check_training_data
+
+    check_training_data(dataset, features, source=f"--data {str(args.data)!r}")
+    longest = int(dataset.episode_lengths.max())
+    if args.chunk_size is not None and args.chunk_size > longest:
+        raise ValueError(f"--chunk-size {args.chunk_size} is longer than the longest episode in {str(args.data)!r} "
+                         f"({longest} steps): every chunk would be mostly padding; give at most {longest}")
+
+
+def _check_batch_size(args: argparse.Namespace, n_samples: int) -> None:
+    """Refuse a --batch-size the data cannot fill (it would be cut to the samples there are, silently)."""
+    if args.batch_size is not None and args.batch_size > n_samples:
+        raise ValueError(f"--batch-size {args.batch_size} is more than the {n_samples} training samples in "
+                         f"{str(args.data)!r}; give at most {n_samples}")
+

@@ -57,6 +57,29 @@ SIM_HZ = 100
 """Physics substeps per second (dt = 0.01); an env step is SIM_HZ / PUSHT.control_hz of them."""
 K_P, K_V = 100.0, 20.0
 """PD gains of the pusher's tracking law (reference values)."""
+MAX_START_ANGLE = 1000.0
+"""Largest |angle| (rad) ``reset_to_state`` accepts: unwrapped demonstration angles stay within ~20 rad."""
+
+
+def check_start(start: np.ndarray, name: str = "options['reset_to_state']") -> np.ndarray:
+    """A (5,) start state [ax, ay, bx, by, angle] whose reset stays in the world, else ValueError naming it.
+
+    The pusher and the block's (x, y) must lie in the 512 x 512 world (the observation space), the
+    angle within +-MAX_START_ANGLE, and the block's origin where the LEGACY reset order puts it
+    (``pusht_geometry.legacy_pose``: up to 90 px from (bx, by)) must lie in the world too, so the
+    first observation is inside ``observation_space``.
+    """
+    w = geo.WORLD_SIZE
+    for i, what in enumerate(("agent x", "agent y", "block x", "block y")):
+        if not 0.0 <= start[i] <= w:
+            raise ValueError(f"{name}: {what} must be in [0, {w:g}] (the world), got {float(start[i])!r}")
+    if abs(start[4]) > MAX_START_ANGLE:
+        raise ValueError(f"{name}: angle must be in [-{MAX_START_ANGLE:g}, {MAX_START_ANGLE:g}] rad, got {float(start[4])!r}")
+    x, y, _ = geo.legacy_pose(start[2:4], float(start[4]))
+    if not (0.0 <= x <= w and 0.0 <= y <= w):
+        raise ValueError(f"{name}: the legacy reset order (see PushTEnv.reset) would put the block's origin at "
+                         f"({x:.1f}, {y:.1f}), outside the [0, {w:g}] world; move (bx, by) inwards")
+    return start
 
 
 class PushTEnv(gym.Env):
@@ -234,10 +257,12 @@ class PushTEnv(gym.Env):
         resolve any initial overlap. Use ``set_state`` for an exact placement.
         """
         options = check_reset_args(seed, options, RESET_OPTIONS, "PushTEnv")
-        super().reset(seed=seed)
+        start = None  # checked before anything changes: a refused reset leaves the episode as it was
         if options.get("reset_to_state") is not None:
-            start = finite_array(options["reset_to_state"], (5,), "options['reset_to_state']", "[ax, ay, bx, by, angle]")
-        else:
+            start = check_start(finite_array(options["reset_to_state"], (5,), "options['reset_to_state']",
+                                             "[ax, ay, bx, by, angle]"))
+        super().reset(seed=seed)
+        if start is None:
             draw_seed = seed if seed is not None else int(self.np_random.integers(0, 2**31 - 1))
             rs = np.random.RandomState(seed=draw_seed)
             start = np.array([rs.randint(50, 450), rs.randint(50, 450),

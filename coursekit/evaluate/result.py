@@ -85,13 +85,28 @@ def check_seeds_disjoint(seeds: Sequence[int], dataset_meta: dict[str, Any] | No
     """Refuse evaluation seeds that were demonstration seeds (meta "episode_seeds", or "seed" + "n_episodes")."""
     if not dataset_meta:
         return
+    if not isinstance(dataset_meta, dict):
+        raise ValueError(f"the demonstrations' meta must be a dict, got {type(dataset_meta).__name__}")
     if "episode_seeds" in dataset_meta:  # the expert skips a failed seed and moves on: use the list
-        used = {int(s) for s in dataset_meta["episode_seeds"]}
+        listed = dataset_meta["episode_seeds"]
+        if not isinstance(listed, (list, tuple)) or not all(_is_int(s) for s in listed):
+            raise ValueError(f"the demonstrations' meta 'episode_seeds' must be a list of ints, got {str(listed)[:60]!r}")
+        used = {int(s) for s in listed}
     elif "seed" in dataset_meta and "n_episodes" in dataset_meta:
-        used = set(range(int(dataset_meta["seed"]), int(dataset_meta["seed"]) + int(dataset_meta["n_episodes"])))
+        seed, n = dataset_meta["seed"], dataset_meta["n_episodes"]
+        if not (_is_int(seed) and _is_int(n) and 0 <= n <= 10**7):
+            raise ValueError(f"the demonstrations' meta 'seed' and 'n_episodes' must be ints (n_episodes in [0, 1e7]), "
+                             f"got {str(seed)[:30]!r} and {str(n)[:30]!r}")
+        used = set(range(seed, seed + n))
     else:
+        return
+    if not used:
         return
     overlap = sorted(int(s) for s in seeds if int(s) in used)
     if overlap:
         raise ValueError(f"evaluation seeds {overlap[:5]}... were used for the demonstrations (seeds {min(used)}..{max(used)}); "
                          f"evaluate on held-out seeds (default: from {EVAL_SEED_START})")
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, (int, np.integer)) and not isinstance(value, bool)

@@ -49,12 +49,18 @@ def normalizers_to_json(normalizers: Mapping[str, Normalizer]) -> dict[str, Any]
 
 def normalizers_from_json(data: Mapping[str, Any]) -> dict[str, Normalizer]:
     """Inverse of :func:`normalizers_to_json`; a malformed entry -> ValueError naming it."""
+    if not isinstance(data, Mapping):
+        raise ValueError(f"normalizers must be a dict of name -> {{'kind', 'state'}}, got {type(data).__name__}")
     out = {}
     for name, entry in data.items():
+        if not isinstance(entry, Mapping) or not isinstance(entry.get("state"), Mapping):
+            raise ValueError(f"normaliser {name!r} must be a dict {{'kind': ..., 'state': {{stat: list}}}}, "
+                             f"got {str(entry)[:80]!r}")
         try:
-            out[name] = normalizer_from_state(entry["kind"], {k: np.asarray(v, dtype=np.float32) for k, v in entry["state"].items()})
-        except (KeyError, TypeError) as exc:
-            raise ValueError(f"normaliser {name!r} is malformed ({type(exc).__name__}: {exc}): {entry!r}") from exc
+            out[name] = normalizer_from_state(entry.get("kind"), {k: np.asarray(v, dtype=np.float32)
+                                                                  for k, v in entry["state"].items()})
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"normaliser {name!r} is malformed ({type(exc).__name__}: {exc}): {str(entry)[:80]!r}") from exc
     return out
 
 

@@ -17,6 +17,7 @@ from typing import Any, NamedTuple
 import torch
 
 from coursekit.data.features import default_features, get_features, training_arrays
+from coursekit.data.validate import check_training_data
 
 
 class PolicySetup(NamedTuple):
@@ -54,6 +55,7 @@ def make_policy(policy_type: str, dataset: Any, *, features: str | None = None, 
         train_fields["batch_size"] = int(batch_size)
     device = resolve_device(device)
     features = features or default_features(dataset.arrays, dataset.meta)
+    check_training_data(dataset, features)  # empty, text, NaN, or actions of another task's width: refused here
     spec = get_features(features)
     low = spec(dataset.arrays)  # (N, Do): the low-dim part (image features: agent_pos)
     cfg = cls.make_config(features=features, obs_type=spec.obs_type, obs_dim=int(low.shape[-1]),

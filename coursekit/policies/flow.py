@@ -35,6 +35,10 @@ from coursekit.flow.loss import TIME_SAMPLINGS, flow_loss, flow_matching_loss
 from coursekit.flow.sampler import METHODS, VelocityModel, euler_step, integrate, time_grid
 from coursekit.policies.unet_chunk import IterativeUNetPolicy, UNetChunkConfig
 
+MAX_INFERENCE_STEPS = 1000
+"""Most integration steps a flow policy takes: 10 suffice (pi0), Euler's error is O(1/N), so beyond 1000
+steps only the time grows (an unbounded N is a hang, not a finer answer)."""
+
 
 @dataclass
 class FlowMatchingPolicyConfig(UNetChunkConfig):
@@ -43,7 +47,7 @@ class FlowMatchingPolicyConfig(UNetChunkConfig):
     time_sampling: str = "beta"
     """Training times: 'beta' (pi0: Beta(1.5, 1) in [0.001, 1), more noisy times) or 'uniform'."""
     num_inference_steps: int = 10
-    """N, integration steps from noise to data at inference (pi0 uses 10)."""
+    """N, integration steps from noise to data at inference (pi0 uses 10), at most MAX_INFERENCE_STEPS."""
     integration_method: str = "euler"
     """'euler' (one U-Net call per step) or 'midpoint' (second order, two calls per step)."""
     time_scale: float = 100.0
@@ -55,11 +59,16 @@ class FlowMatchingPolicyConfig(UNetChunkConfig):
             raise ValueError(f"time_sampling must be one of {TIME_SAMPLINGS}, got {self.time_sampling!r}")
         if self.integration_method not in METHODS:
             raise ValueError(f"integration_method must be one of {METHODS}, got {self.integration_method!r}")
-        if not isinstance(self.num_inference_steps, int) or isinstance(self.num_inference_steps, bool) \
-                or self.num_inference_steps < 1:
-            raise ValueError(f"num_inference_steps must be a positive int, got {self.num_inference_steps!r}")
+        check_steps(self.num_inference_steps)
         if not float(self.time_scale) > 0:
             raise ValueError(f"time_scale must be > 0, got {self.time_scale!r}")
+
+
+def check_steps(n: Any) -> int:
+    """``n`` if it is an int in [1, MAX_INFERENCE_STEPS], else ValueError showing it."""
+    if not isinstance(n, int) or isinstance(n, bool) or not 1 <= n <= MAX_INFERENCE_STEPS:
+        raise ValueError(f"num_inference_steps must be an int in [1, {MAX_INFERENCE_STEPS}] for a flow policy, got {n!r}")
+    return n
 
 
 class EulerHead:
@@ -127,7 +136,8 @@ class FlowMatchingPolicy(IterativeUNetPolicy):
         method = sampler or self.config.integration_method
         if method != "euler":
             raise ValueError(f"real-time chunking on a flow policy integrates with Euler, got sampler {method!r}")
-        return EulerHead(self.velocity, cond, int(num_inference_steps or self.config.num_inference_steps))
+        n = num_inference_steps
+        return EulerHead(self.velocity, cond, self.config.num_inference_steps if n is None else check_steps(n))
 
     def describe_sampling(self, **sampling: Any) -> dict[str, Any]:
         """Which integrator, how many steps and U-Net calls ``predict_chunk(..., **sampling)`` runs (for reports)."""
@@ -135,9 +145,16 @@ class FlowMatchingPolicy(IterativeUNetPolicy):
         method = sampling.get("sampler") or self.config.integration_method
         if method not in METHODS:
             raise ValueError(f"sampler must be one of {METHODS} for a flow policy, got {method!r}")
-        steps = sampling.get("steps") or sampling.get("num_inference_steps") or self.config.num_inference_steps
+        steps = self._steps(sampling.get("steps"), sampling.get("num_inference_steps"))
         return {"sampler": method, "num_inference_steps": steps,
                 "network_calls": steps * (2 if method == "midpoint" else 1)}
+
+    def _steps(self, steps: int | None, num_inference_steps: int | None) -> int:
+        """N from the two spellings of the option (None: the config's), checked."""
+        if steps is not None and num_inference_steps is not None and steps != num_inference_steps:
+            raise ValueError(f"give steps or num_inference_steps, not both ({steps} != {num_inference_steps})")
+        n = steps if steps is not None else num_inference_steps
+        return self.config.num_inference_steps if n is None else check_steps(n)
 
     @torch.no_grad()
     def predict_chunk(self, obs_history: Any, *, generator: torch.Generator | None = None, sampler: str | None = None,
@@ -150,9 +167,7 @@ class FlowMatchingPolicy(IterativeUNetPolicy):
         (None: global generator). ``step_fn`` replaces the integration step (e.g. a student's
         ``euler_step``). With ``return_trajectory`` also returns the path (N+1, B, Tp, Da) in raw units.
         """
-        if steps is not None and num_inference_steps is not None and steps != num_inference_steps:
-            raise ValueError(f"give steps or num_inference_steps, not both ({steps} != {num_inference_steps})")
-        n = steps or num_inference_steps or self.config.num_inference_steps
+        n = self._steps(steps, num_inference_steps)
         method = sampler or self.config.integration_method
         if method not in METHODS:
             raise ValueError(f"sampler must be one of {METHODS} for a flow policy, got {method!r}")

@@ -111,13 +111,15 @@ class AlohaEnv(gymnasium.Env):
         """Start pose, objects spawned from ``self.np_random`` (or ``options["env_state"]``)."""
         options = check_reset_args(seed, options, {"env_state": "object poses, the task's env_state vector"},
                                    type(self).__name__)
+        env_state = None  # checked before anything changes: a refused reset leaves the episode as it was
+        if options.get("env_state") is not None:
+            env_state = self.task.check_env_state(finite_array(options["env_state"], (self.task.env_state_dim,),
+                                                               "options['env_state']", "[x y z qw qx qy qz] per object"),
+                                                  "options['env_state']")
         super().reset(seed=seed)
         mujoco.mj_resetData(self.model, self.data)
         self.index.set_arm_pose(self.data, np.concatenate([START_ARM_QPOS, START_ARM_QPOS]), START_FINGER)
-        if options.get("env_state") is not None:
-            env_state = finite_array(options["env_state"], (self.task.env_state_dim,), "options['env_state']",
-                                     "[x y z qw qx qy qz] per object")
-        else:
+        if env_state is None:
             env_state = self.task.spawn(self.np_random)
         self.task.set_env_state(self.data, env_state)
         self.index.set_action(self.data, start_qpos14())

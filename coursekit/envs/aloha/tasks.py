@@ -20,6 +20,10 @@ from coursekit.envs.aloha.model import ArmPairIndex
 from coursekit.tasks.aloha import INSERTION, TRANSFER_CUBE
 
 _IDENTITY_QUAT = np.array([1.0, 0.0, 0.0, 0.0])
+MAX_HEIGHT = 1.0
+"""Highest an object may be put above the table top (m); the arms reach about 0.6 m up."""
+QUAT_NORM_TOLERANCE = 0.01
+"""How far from 1 a given quaternion's norm may be (recorded float32 poses are within 1e-6)."""
 
 
 _KEY = 1 << 20  # geom-pair key: min(id) * _KEY + max(id), unique for any model with < 2**20 geoms
@@ -76,6 +80,33 @@ class AlohaTask:
             xyz = [rng.uniform(*x_range), rng.uniform(*y_range), z]
             poses.append(np.concatenate([xyz, _IDENTITY_QUAT]))
         return np.concatenate(poses)
+
+    def workspace(self) -> tuple[np.ndarray, np.ndarray]:
+        """(low (3,), high (3,)) xyz in metres where an object may be put: over the table, up to MAX_HEIGHT above it."""
+        (tid,) = self.table
+        centre, half = self.model.geom_pos[tid], self.model.geom_size[tid]  # a box geom: half sizes
+        top = centre[2] + half[2]
+        return (np.array([centre[0] - half[0], centre[1] - half[1], top]),
+                np.array([centre[0] + half[0], centre[1] + half[1], top + MAX_HEIGHT]))
+
+    def check_env_state(self, env_state: np.ndarray, name: str = "env_state") -> np.ndarray:
+        """``env_state`` (7 * n_objects,) if every object is in the workspace with a unit quaternion, else ValueError.
+
+        A pose far off the table (1e6 m) would make the published stage reward read nonsense from
+        an empty scene; a zero quaternion cannot be normalised. Both are refused, naming the object.
+        """
+        low, high = self.workspace()
+        for i, body in enumerate(self.objects):
+            xyz, quat = env_state[7 * i: 7 * i + 3], env_state[7 * i + 3: 7 * i + 7]
+            if np.any(xyz < low) or np.any(xyz > high):
+                box = ", ".join(f"{a} in [{lo:.2f}, {hi:.2f}]" for a, lo, hi in zip("xyz", low, high))
+                raise ValueError(f"{name}: the {body} at xyz {np.round(xyz, 4).tolist()} m is outside the workspace over "
+                                 f"the table ({box} m)")
+            norm = float(np.linalg.norm(quat))
+            if abs(norm - 1.0) > QUAT_NORM_TOLERANCE:
+                raise ValueError(f"{name}: the {body}'s orientation [qw qx qy qz] must be a unit quaternion (norm 1 +- "
+                                 f"{QUAT_NORM_TOLERANCE:g}), got {quat.tolist()} (norm {norm:.4g})")
+        return env_state
 
     def set_env_state(self, data: mujoco.MjData, env_state: np.ndarray) -> None:
         """Put the objects at (7 * n_objects,) poses, at rest."""
