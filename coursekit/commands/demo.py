@@ -133,8 +133,8 @@ def run(args: argparse.Namespace) -> int:
           f"largest drift from the recorded states {drift:.2e} px")
 
     print("[3/4] writing the replay as a 3-D meshcat animation ...")
-    from coursekit.viz.meshcat_pusht import export_pusht_rollout
-    from coursekit.viz.meshcat_scene import MeshcatScene
+    from coursekit.viz.meshcat.pusht import export_pusht_rollout
+    from coursekit.viz.meshcat.scene import MeshcatScene
 
     t0 = time.perf_counter()
     with MeshcatScene() as scene:  # its server is killed as soon as the page is written

@@ -109,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
     from coursekit.policies import get_policy_class
     from coursekit.policies.factory import make_policy
     from coursekit.train import TrainConfig, train
-    from coursekit.viz.run_log import MetricsLog
+    from coursekit.training_log import MetricsLog
 
     if args.minutes is None and args.steps is None:
         raise ValueError("give a budget: --minutes M and/or --steps N")
@@ -161,7 +161,7 @@ def is_run_dir(path: Path) -> bool:
     checkpoint or a metrics.csv with the trainer's own header: a user's folder never qualifies.
     """
     from coursekit.checkpoint import CONFIG_FILE, WEIGHTS_FILE, is_checkpoint_dir
-    from coursekit.viz.run_log import COLUMNS, LOSS_PLOT_NAME, METRICS_NAME
+    from coursekit.training_log import COLUMNS, LOSS_PLOT_NAME, METRICS_NAME
 
     names = {p.name for p in path.iterdir()}
     if not names or not names <= {CONFIG_FILE, WEIGHTS_FILE, METRICS_NAME, LOSS_PLOT_NAME}:

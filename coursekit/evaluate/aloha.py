@@ -1,6 +1,6 @@
 """Closed-loop evaluation on the ALOHA arm pair, with ACT's per-stage success rates.
 
-Protocol (Zhao et al. 2023, Sec. V; ``shared/reference/act_aloha.md``): episodes of 400 control
+Protocol (Zhao et al. 2023, Sec. V): episodes of 400 control
 steps from held-out spawn seeds (100000 + i; demonstrations use small seeds). Each task has four
 reward stages (transfer cube: touched, lifted, received, held by the left gripper; insertion:
 both grasped, both lifted, peg touches socket, inserted). Reported:
@@ -32,7 +32,7 @@ ALOHA_TASKS = {"transfer_cube": "AlohaTransferCubeEnv", "insertion": "AlohaInser
 
 STATE_COLUMNS = ("stage", "strict_success", *(f"qpos_{i}" for i in range(14)))
 """First 16 columns of ``EvalResult.states`` recorded on the arm pair; the rest (nq) is the full
-MuJoCo ``physics_qpos`` (for ``coursekit.viz.mujoco_meshcat`` animations and replays)."""
+MuJoCo ``physics_qpos`` (for ``coursekit.viz.meshcat.mujoco_model`` animations and replays)."""
 
 
 class ArmPairAdapter:

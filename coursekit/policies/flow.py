@@ -63,7 +63,7 @@ class FlowMatchingPolicy(UNetChunkPolicy):
     policy_type = "flow"
     config_class = FlowMatchingPolicyConfig
     config: FlowMatchingPolicyConfig
-    sampling_options = ("sampler", "num_inference_steps", "steps", "return_trajectory", "step_fn")
+    sampling_options = ("sampler", "num_inference_steps", "return_trajectory", "step_fn")
 
     def velocity(self, x_t: torch.Tensor, t: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
         """v_theta: chunk x_t (B, Tp, Da), times t (B,) in [0, 1], condition (B, cond_dim) -> (B, Tp, Da)."""
@@ -86,24 +86,23 @@ class FlowMatchingPolicy(UNetChunkPolicy):
         method = sampling.get("sampler") or self.config.integration_method
         if method not in METHODS:
             raise ValueError(f"sampler must be one of {METHODS} for a flow policy, got {method!r}")
-        steps = sampling.get("steps") or sampling.get("num_inference_steps") or self.config.num_inference_steps
+        steps = sampling.get("num_inference_steps")
+        steps = self.config.num_inference_steps if steps is None else steps
         return {"sampler": method, "num_inference_steps": steps,
                 "network_calls": steps * (2 if method == "midpoint" else 1)}
 
     @torch.no_grad()
     def predict_chunk(self, obs_history: Any, *, generator: torch.Generator | None = None, sampler: str | None = None,
-                      num_inference_steps: int | None = None, steps: int | None = None,
-                      return_trajectory: bool = False, step_fn: Callable[..., torch.Tensor] | None = None) -> Any:
+                      num_inference_steps: int | None = None, return_trajectory: bool = False,
+                      step_fn: Callable[..., torch.Tensor] | None = None) -> Any:
         """Raw history (B, To, Do) (or dict for images; or unbatched (To, Do)) -> raw chunk (B, Tp, Da).
 
         Numpy in, numpy out; tensors in, tensors out. ``sampler`` ('euler'/'midpoint') and
-        ``num_inference_steps`` (alias ``steps``) override the config; x_1 comes from ``generator``
+        ``num_inference_steps`` override the config; x_1 comes from ``generator``
         (None: global generator). ``step_fn`` replaces the integration step (e.g. a student's
         ``euler_step``). With ``return_trajectory`` also returns the path (N+1, B, Tp, Da) in raw units.
         """
-        if steps is not None and num_inference_steps is not None and steps != num_inference_steps:
-            raise ValueError(f"give steps or num_inference_steps, not both ({steps} != {num_inference_steps})")
-        n = steps or num_inference_steps or self.config.num_inference_steps
+        n = self.config.num_inference_steps if num_inference_steps is None else num_inference_steps
         method = sampler or self.config.integration_method
         if method not in METHODS:
             raise ValueError(f"sampler must be one of {METHODS} for a flow policy, got {method!r}")

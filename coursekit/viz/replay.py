@@ -38,7 +38,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from coursekit.viz.meshcat_scene import MeshcatScene
+    from coursekit.viz.meshcat.scene import MeshcatScene
 
 PUSHT = "pusht"
 """Task name of PushT."""
@@ -215,7 +215,7 @@ def _caption_overlay(task: str, episodes: list[EpisodeRecording], starts_s: list
 def replay_html(task: str, episodes: list[EpisodeRecording], fps: float, scene: MeshcatScene | None = None,
                 model=None) -> str:
     """The replay page as a string (see the module docstring); ``model``: the arm pair's MjModel."""
-    from coursekit.viz.meshcat_scene import MeshcatScene
+    from coursekit.viz.meshcat.scene import MeshcatScene
 
     starts, hold = timeline([len(ep.states) for ep in episodes], fps)
     states = _played_states(episodes, hold)  # (F, S)
@@ -223,11 +223,11 @@ def replay_html(task: str, episodes: list[EpisodeRecording], fps: float, scene: 
     scene = MeshcatScene() if own else scene
     try:
         if task == PUSHT:
-            from coursekit.viz.meshcat_pusht import PushTMeshcat
+            from coursekit.viz.meshcat.pusht import PushTMeshcat
 
             PushTMeshcat(scene, show_target=False).animate(states[:, :5], fps=fps, play=True)
         else:
-            from coursekit.viz.mujoco_meshcat import MujocoMeshcat
+            from coursekit.viz.meshcat.mujoco_model import MujocoMeshcat
 
             MujocoMeshcat(_arm_model(task) if model is None else model, scene).animate_qpos(states, fps=fps, play=True)
         page = scene.static_html()
