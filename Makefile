@@ -64,7 +64,8 @@ sandbox:
 test: setup browser sandbox
 	COURSEKIT_FAST=1 COURSEKIT_EXERCISES=solutions $(PY) -m pytest -q --durations=15
 
-## Everything but notebooks and slow tests.
+## Everything but notebooks, real-browser and slow tests (slow: over ~20 s on 2 cores, e.g. the
+## shipped-checkpoint reproductions).
 test-fast: setup
 	COURSEKIT_FAST=1 $(PY) -m pytest -q -m "not slow and not notebook and not browser"
 

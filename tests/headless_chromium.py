@@ -1,8 +1,8 @@
 """Test helper: screenshots of exported HTML in a real (headless) chromium, proof that a page draws.
 
 meshcat's exported pages draw with WebGL. Headless chromium on a machine without a GPU renders
-them through SwiftShader (the CPU WebGL backend) when given the flags below (a meshcat page in
-about a second or two here: see the durations of ``tests/test_browser.py``).
+them through SwiftShader (the CPU WebGL backend) when given the flags below (a few seconds a
+page; ``pytest tests/test_browser.py --durations=0`` times them on your machine).
 ``--virtual-time-budget`` lets the page's scripts and animation frames run for that many
 milliseconds of *virtual* time before the picture is taken.
 

@@ -92,6 +92,7 @@ def test_bad_arguments_name_the_value():
         policy.describe_sampling(steps=2)
 
 
+@pytest.mark.slow
 def test_learns_two_modes_that_regression_would_average():
     """Two equally likely chunks (+0.5, -0.5) for one observation: flow samples both, 1 step gives the mean."""
     policy = tiny(time_sampling="uniform")
