@@ -37,9 +37,9 @@ demo: setup
 	$(VENV)/bin/coursekit demo
 
 ## JupyterLab on the course notebooks.
-## Course notebooks are saved without outputs (coursekit/viz/notebook_save.py): git stays clean.
+## Course notebooks are saved without outputs (coursekit/notebook_save.py): git stays clean.
 lab: setup
-	$(VENV)/bin/jupyter lab notebooks/ --ContentsManager.pre_save_hook=coursekit.viz.notebook_save.strip_before_save \
+	$(VENV)/bin/jupyter lab notebooks/ --ContentsManager.pre_save_hook=coursekit.notebook_save.strip_before_save \
 	  $(if $(filter 0,$(shell id -u)),--allow-root,)
 
 ## Debian's chromium for the real-browser tests (only when missing and we are root).
@@ -64,7 +64,8 @@ sandbox:
 test: setup browser sandbox
 	COURSEKIT_FAST=1 COURSEKIT_EXERCISES=solutions $(PY) -m pytest -q --durations=15
 
-## Everything but notebooks and slow tests.
+## Everything but notebooks, real-browser and slow tests (slow: over ~20 s on 2 cores, e.g. the
+## shipped-checkpoint reproductions).
 test-fast: setup
 	COURSEKIT_FAST=1 $(PY) -m pytest -q -m "not slow and not notebook and not browser"
 

@@ -1,8 +1,12 @@
-"""coursekit: action-chunk generative policies (Diffusion Policy and ACT), taught on a laptop CPU.
+"""coursekit: action-chunk generative policies taught on a laptop CPU.
+
+Diffusion Policy (Chi et al. 2023, RSS), ACT (Zhao et al. 2023, RSS), a flow-matching head on
+Diffusion Policy's network (Lipman et al. 2023; pi0's convention, Black et al. 2024) and a
+regression baseline; every policy type is registered in ``coursekit.policies.POLICY_TYPES``.
 
 Submodules load lazily: ``import coursekit`` costs almost nothing, and torch, mujoco or meshcat
 are imported only when a part that needs them is first touched (``coursekit.policies`` pulls
-torch; ``coursekit.envs.aloha`` pulls mujoco; ``coursekit.viz.meshcat_*`` pulls meshcat).
+torch; ``coursekit.envs.aloha`` pulls mujoco; ``coursekit.viz.meshcat.scene`` pulls meshcat).
 
 Glossary (paper symbol -> name in code, notebooks and docs alike; see ``coursekit.glossary``):
 
@@ -25,6 +29,7 @@ _LAZY = {
     "experts": "coursekit.experts:",
     "data": "coursekit.data:",
     "diffusion": "coursekit.diffusion:",
+    "flow": "coursekit.flow:",
     "nn": "coursekit.nn:",
     "policies": "coursekit.policies:",
     "execution": "coursekit.execution:",
@@ -34,6 +39,7 @@ _LAZY = {
     "config": "coursekit.config:",
     "checkpoint": "coursekit.checkpoint:",
     "train": "coursekit.train:",
+    "training_log": "coursekit.training_log:",
     "evaluate": "coursekit.evaluate:",
     "teleop": "coursekit.teleop:",
     "tasks": "coursekit.tasks:",

@@ -5,7 +5,7 @@ Layout::
     CKPT/
       model.safetensors   the policy's state_dict (tensors only; safetensors cannot hold code)
       config.json         {"format": "coursekit-checkpoint", "format_version": 1,
-                           "policy_type": "diffusion" | "regression" | "act",
+                           "policy_type": "diffusion" | "regression" | "act" | "flow",
                            "config": {...the policy's dataclass config...},
                            "normalizers": {name: {"kind": "minmax", "state": {"low": [...], ...}}},
                            "dataset": {...dataset meta...}, "training": {...training summary...},
@@ -27,6 +27,7 @@ reader, or a process killed at any moment, sees the old checkpoint or the new on
 holds CKPT's lock (the caller's, e.g. ``coursekit train``'s on its run folder, or its own), which
 records the staging directory, so a killed write's leftovers are removed by the next one. Other files in
 CKPT (a training run's metrics.csv and loss.png) are carried over, never deleted.
+The policy types are the keys of ``coursekit.policies.POLICY_TYPES`` (the one registry).
 Loading rebuilds the policy from its registered class and config (``coursekit.policies``), checks
 the weights' SHA-256 against config.json, then every tensor name and shape against the freshly
 built policy, and refuses anything else (a config field missing, unknown or of the wrong type, a

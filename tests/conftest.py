@@ -29,7 +29,7 @@ def one_torch_thread():
 @pytest.fixture(scope="module")
 def chromium(request):
     """Path of Debian's headless chromium; without it the requesting module's browser tests skip, loudly."""
-    from coursekit.viz.browser import find_chromium
+    from headless_chromium import find_chromium
 
     path = find_chromium()
     if path is None:

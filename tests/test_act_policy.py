@@ -159,6 +159,7 @@ def test_image_tokens_smoke():
         policy.predict_chunk(np.zeros((2, 1, Do)))
 
 
+@pytest.mark.slow
 def test_batcher_pads_and_training_reduces_the_loss():
     rng = np.random.default_rng(0)
     eps = [{"qpos": rng.normal(size=(L, 14)), "env_state": rng.normal(size=(L, 7)),

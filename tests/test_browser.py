@@ -1,7 +1,7 @@
 """Real-browser checks: exported meshcat pages really draw the scene in headless chromium.
 
 Each test exports a rollout's HTML, screenshots it with headless chromium (SwiftShader WebGL,
-flags as in ``stack.md``) and checks the picture: the objects' colours cover plausible areas and
+flags in ``tests/headless_chromium.py``) and checks the picture: the objects' colours cover plausible areas and
 the image is not blank. The colours are the scene's own (``pusht_render`` constants, the MuJoCo
 model's rgba); Lambert shading keeps lit top faces close to them.
 """
@@ -18,7 +18,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 pytest.importorskip("meshcat")
 from PIL import Image  # noqa: E402
 
-from coursekit.viz.browser import screenshot_html  # noqa: E402
+from headless_chromium import screenshot_html  # noqa: E402
 
 pytestmark = pytest.mark.browser
 
@@ -26,7 +26,7 @@ pytestmark = pytest.mark.browser
 
 @pytest.fixture(scope="module")
 def scene():
-    from coursekit.viz.meshcat_scene import MeshcatScene
+    from coursekit.viz.meshcat.scene import MeshcatScene
 
     with MeshcatScene() as s:
         yield s
@@ -65,7 +65,7 @@ def block_centroid_x(img: np.ndarray) -> float:
 def test_pusht_rollout_page_shows_the_scene(chromium, scene, tmp_path):
     from coursekit.envs.pusht import PushTEnv
     from coursekit.envs.pusht_render import AGENT_COLOR, BLOCK_COLOR, GOAL_COLOR
-    from coursekit.viz.meshcat_pusht import export_pusht_rollout
+    from coursekit.viz.meshcat.pusht import export_pusht_rollout
 
     env = PushTEnv()
     env.reset(seed=3)
@@ -93,7 +93,7 @@ def test_pusht_rollout_page_shows_the_scene(chromium, scene, tmp_path):
 
 def test_pusht_animation_plays_in_the_browser(chromium, scene, tmp_path):
     """Paused at the first step vs playing for the page's 5 s of virtual time: the block moved right."""
-    from coursekit.viz.meshcat_pusht import export_pusht_rollout
+    from coursekit.viz.meshcat.pusht import export_pusht_rollout
 
     states = pusht_states(120, 120.0, 400.0)  # 12 s at 10 Hz: still sliding when the shot is taken
     still = export_pusht_rollout(states, tmp_path / "still.html", play=False, scene=scene)
@@ -106,7 +106,7 @@ def test_pusht_animation_plays_in_the_browser(chromium, scene, tmp_path):
 def test_mujoco_page_draws_every_geom_type(chromium, scene, tmp_path):
     import mujoco
 
-    from coursekit.viz.mujoco_meshcat import GEOM_GALLERY_XML, MujocoMeshcat
+    from coursekit.viz.meshcat.mujoco_model import GEOM_GALLERY_XML, MujocoMeshcat
 
     model = mujoco.MjModel.from_xml_string(GEOM_GALLERY_XML)
     viewer = MujocoMeshcat(model, scene, camera=(50.0, -90.0))
@@ -132,7 +132,7 @@ def test_aloha_rollout_page_shows_the_arm_pair(chromium, scene, tmp_path):
     pytest.importorskip("mujoco")
     from coursekit.envs.aloha import AlohaTransferCubeEnv
     from coursekit.experts.aloha_scripted import scripted_episode
-    from coursekit.viz.mujoco_meshcat import MujocoMeshcat, geom_rgba
+    from coursekit.viz.meshcat.mujoco_model import MujocoMeshcat, geom_rgba
 
     env = AlohaTransferCubeEnv()
     episode, _ = scripted_episode("transfer_cube", seed=0, env=env)
@@ -155,7 +155,7 @@ def test_aloha_rollout_page_shows_the_arm_pair(chromium, scene, tmp_path):
 def test_notebook_iframe_shows_the_scene(chromium, scene, tmp_path):
     """What a notebook cell shows: the exported page inside show_html's iframe srcdoc."""
     from coursekit.envs.pusht_render import BLOCK_COLOR, GOAL_COLOR
-    from coursekit.viz.meshcat_pusht import PushTMeshcat
+    from coursekit.viz.meshcat.pusht import PushTMeshcat
     from coursekit.viz.notebook import show_html
 
     viewer = PushTMeshcat(scene)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import pickle
+import re
 
 import numpy as np
 import pytest
@@ -225,3 +226,11 @@ def test_find_checkpoint_looks_in_the_shipped_folder_then_elsewhere(saved, tmp_p
     assert "act_transfer_cube" in shipped_checkpoints()
     assert find_checkpoint("no_such_checkpoint") is None
     assert find_checkpoint("no_such_checkpoint", "ckpt", also_in=(path.parent,)) == path
+
+
+def test_the_documented_layout_names_every_registered_policy_type():
+    import coursekit.checkpoint
+    from coursekit.policies import POLICY_TYPES
+
+    layout = next(line for line in coursekit.checkpoint.__doc__.splitlines() if '"policy_type":' in line)
+    assert sorted(re.findall(r'"(\w+)"', layout.split(":", 1)[1])) == sorted(POLICY_TYPES)

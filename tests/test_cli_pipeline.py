@@ -69,7 +69,7 @@ def test_a_run_folder_and_an_eval_replay_a_person_can_look_at(policy, task, demo
         Path(f).name for f in files.values())
     assert main(["eval", str(run), "--episodes", "1", "--max-steps", "2", "--no-progress", "--record", str(record)]) == 2
 
-    from coursekit.viz.browser import find_chromium, screenshot_html
+    from headless_chromium import find_chromium, screenshot_html
 
     if find_chromium() is None:
         pytest.skip("headless chromium not installed (make test installs it as root)")

@@ -139,6 +139,7 @@ def act_pusht():
     return load_checkpoint(CKPT / "act_pusht", device="cpu")
 
 
+@pytest.mark.slow
 def test_zero_delay_reproduces_receding_horizon_on_pusht(dp):
     c = dp.config
     ref, _ = _pusht(dp, lambda pc: RecedingHorizon(pc, c.n_obs_steps, c.n_action_steps))
@@ -159,6 +160,7 @@ def test_zero_delay_ensemble_reproduces_temporal_ensembling_on_pusht(act_pusht):
     np.testing.assert_array_equal(acts, ref)
 
 
+@pytest.mark.slow
 def test_delay_loop_is_deterministic_by_seed(dp):
     c = dp.config
 

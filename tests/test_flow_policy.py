@@ -52,8 +52,7 @@ def test_predict_chunk_is_euler_from_seeded_noise_clamped_and_raw():
     policy = tiny()
     obs = np.random.default_rng(1).uniform(0, 500, (3, 2, 6)).astype(np.float32)
     a = policy.predict_chunk(obs, generator=torch.Generator().manual_seed(5), num_inference_steps=4)
-    b = policy.predict_chunk(obs, generator=torch.Generator().manual_seed(5), steps=4)
-    assert a.shape == (3, 16, 2) and isinstance(a, np.ndarray) and np.array_equal(a, b)
+    assert a.shape == (3, 16, 2) and isinstance(a, np.ndarray)
     assert a.min() >= 0.0 and a.max() <= 500.0
     # by hand: x1 from the generator, four Euler steps of -1/4, clamp, unnormalise
     x = torch.randn(3, 16, 2, generator=torch.Generator().manual_seed(5))
@@ -64,13 +63,14 @@ def test_predict_chunk_is_euler_from_seeded_noise_clamped_and_raw():
             x = x - 0.25 * policy.unet(x, 100.0 * t, cond)
     np.testing.assert_allclose(a, ((x.clamp(-1, 1) + 1) * 250.0).numpy(), rtol=1e-4, atol=1e-3)
     # a student's step plugs in; the trajectory has N + 1 iterates
-    c, traj = policy.predict_chunk(torch.as_tensor(obs), generator=torch.Generator().manual_seed(5), steps=4,
-                                   step_fn=euler_step, return_trajectory=True)
+    c, traj = policy.predict_chunk(torch.as_tensor(obs), generator=torch.Generator().manual_seed(5),
+                                   num_inference_steps=4, step_fn=euler_step, return_trajectory=True)
     np.testing.assert_allclose(c.numpy(), a, rtol=1e-5, atol=1e-4)
     assert traj.shape == (5, 3, 16, 2)
-    m = policy.predict_chunk(obs[0], generator=torch.Generator().manual_seed(5), sampler="midpoint", steps=2)
+    m = policy.predict_chunk(obs[0], generator=torch.Generator().manual_seed(5), sampler="midpoint",
+                             num_inference_steps=2)
     assert m.shape == (16, 2)
-    assert policy.describe_sampling(sampler="midpoint", steps=2)["network_calls"] == 4
+    assert policy.describe_sampling(sampler="midpoint", num_inference_steps=2)["network_calls"] == 4
 
 
 def test_bad_arguments_name_the_value():
@@ -85,15 +85,18 @@ def test_bad_arguments_name_the_value():
     obs = np.zeros((1, 2, 6), dtype=np.float32)
     with pytest.raises(ValueError, match="'ddim'"):
         policy.predict_chunk(obs, sampler="ddim")
-    with pytest.raises(ValueError, match="not both"):
-        policy.predict_chunk(obs, steps=2, num_inference_steps=3)
     for bad in (0, 1001, 10**20):  # an explicit 0 is refused, never replaced by the config's 10
         with pytest.raises(ValueError, match=f"got {bad}"):
-            policy.predict_chunk(obs, steps=bad)
+            policy.predict_chunk(obs, num_inference_steps=bad)
         with pytest.raises(ValueError, match=f"got {bad}"):
             policy.describe_sampling(num_inference_steps=bad)
+    with pytest.raises(TypeError, match="'steps'"):  # one name for N: num_inference_steps
+        policy.predict_chunk(obs, steps=2)
+    with pytest.raises(ValueError, match="'steps'"):
+        policy.describe_sampling(steps=2)
 
 
+@pytest.mark.slow
 def test_learns_two_modes_that_regression_would_average():
     """Two equally likely chunks (+0.5, -0.5) for one observation: flow samples both, 1 step gives the mean."""
     policy = tiny(time_sampling="uniform")
@@ -107,10 +110,10 @@ def test_learns_two_modes_that_regression_would_average():
         opt.zero_grad()
         loss.backward()
         opt.step()
-    many = policy.predict_chunk(obs, generator=torch.Generator().manual_seed(1), steps=10) / 250.0 - 1.0
+    many = policy.predict_chunk(obs, generator=torch.Generator().manual_seed(1), num_inference_steps=10) / 250.0 - 1.0
     means = many.mean(dim=(1, 2))  # (64,) per-sample mean of the normalised chunk
     assert (means > 0.3).float().mean() > 0.25 and (means < -0.3).float().mean() > 0.25, means
-    one = policy.predict_chunk(obs, generator=torch.Generator().manual_seed(1), steps=1) / 250.0 - 1.0
+    one = policy.predict_chunk(obs, generator=torch.Generator().manual_seed(1), num_inference_steps=1) / 250.0 - 1.0
     # one Euler step heads for the mean between the modes (exactly, for a perfectly learned field)
     assert float(one.mean(dim=(1, 2)).abs().mean()) < 0.5 * float(means.abs().mean())
 

@@ -36,6 +36,7 @@ def test_one_step_with_the_exact_field_lands_on_the_mean():
     assert frac == pytest.approx(list(MIX.weights), abs=0.02)
 
 
+@pytest.mark.slow
 def test_learned_flow_reproduces_mode_weights_at_16_steps():
     torch.manual_seed(0)
     with torch.no_grad():

@@ -112,6 +112,7 @@ def test_partial_credit_hints_by_failure_kind_and_hidden_tests():
     assert exercise_status(exercise, outcomes) == "timeout"
 
 
+@pytest.mark.slow
 def test_one_wrong_function_fails_only_its_own_tests(tmp_path):
     """Issue 18: the epsilon_loss tests use the REFERENCE q_sample, so a wrong q_sample does not cascade."""
     source = (repo_root() / "solutions" / "noise_loss.py").read_text()

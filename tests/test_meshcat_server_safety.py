@@ -14,7 +14,7 @@ import pytest
 psutil = pytest.importorskip("psutil")
 pytest.importorskip("meshcat")
 
-from coursekit.viz.meshcat_scene import MeshcatScene  # noqa: E402
+from coursekit.viz.meshcat.scene import MeshcatScene  # noqa: E402
 
 
 def _gone(pid: int, timeout: float = 10.0) -> bool:
@@ -58,7 +58,7 @@ def test_server_listens_on_loopback_only():
 
 _THREAD_SCENE = """
 import threading, time
-from coursekit.viz.meshcat_scene import MeshcatScene
+from coursekit.viz.meshcat.scene import MeshcatScene
 box = []
 t = threading.Thread(target=lambda: box.append(MeshcatScene()))
 t.start(); t.join()                      # the creating thread has ENDED: the server must still serve

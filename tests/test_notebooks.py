@@ -48,7 +48,7 @@ def test_committed_as_the_git_filter_writes_them(path):
     """`git status` stays clean after a Run All only if stripping maps the file to itself."""
     import nbformat
 
-    from coursekit.viz.notebook_save import strip_notebook
+    from coursekit.notebook_save import strip_notebook
 
     text = path.read_text()
     expected = nbformat.writes(strip_notebook(nbformat.reads(text, as_version=4)))
@@ -60,10 +60,10 @@ def test_committed_as_the_git_filter_writes_them(path):
 def test_makefile_installs_the_kernel_and_the_filter():
     make = (ROOT / "Makefile").read_text()
     assert f"--name $(KERNEL)" in make and f"KERNEL := {KERNEL}" in make and "--user --name python3" not in make
-    from coursekit.viz.notebook_save import STRIP_EXTRA_KEYS
+    from coursekit.notebook_save import STRIP_EXTRA_KEYS
 
     assert "nbstripout --install" in make and " ".join(STRIP_EXTRA_KEYS) in make
-    assert "--ContentsManager.pre_save_hook=coursekit.viz.notebook_save.strip_before_save" in make
+    assert "--ContentsManager.pre_save_hook=coursekit.notebook_save.strip_before_save" in make
     assert any(line.startswith("nbstripout==") for line in (ROOT / "environment.txt").read_text().splitlines())
 
 
@@ -211,7 +211,7 @@ def test_lab_saves_a_run_notebook_as_committed():
         cell.metadata["execution"] = {"iopub.status.busy": "2026-12-01T00:00:00Z"}
         cell.metadata["scrolled"] = True
     config = Config()
-    config.ContentsManager.pre_save_hook = "coursekit.viz.notebook_save.strip_before_save"
+    config.ContentsManager.pre_save_hook = "coursekit.notebook_save.strip_before_save"
     with tempfile.TemporaryDirectory() as tmp:
         manager = FileContentsManager(root_dir=tmp, config=config)
         manager.save({"type": "notebook", "format": "json", "content": nb}, path.name)

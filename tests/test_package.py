@@ -31,6 +31,17 @@ def test_gym_ids_registered():
         assert env_id in gymnasium.registry
 
 
+def test_every_generative_head_is_public_beside_the_others():
+    """``coursekit.flow`` is reached like ``coursekit.diffusion`` (lazily, the very module)."""
+    import importlib
+
+    import coursekit
+
+    for name in ("diffusion", "flow", "policies", "train", "training_log"):
+        assert name in dir(coursekit)
+        assert getattr(coursekit, name) is importlib.import_module(f"coursekit.{name}")
+
+
 def test_unknown_attribute():
     import coursekit
 

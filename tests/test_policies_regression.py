@@ -57,6 +57,7 @@ def test_prediction_is_deterministic_and_raw():
         policy.check_sampling({"sampler": "ddim"})
 
 
+@pytest.mark.slow
 def test_learns_the_conditional_mean_of_a_bimodal_target():
     """The failure the paper predicts: two equally likely chunks (+0.5, -0.5) -> the mean 0."""
     policy = tiny()

@@ -192,7 +192,8 @@ def test_import_is_light():
 
 
 def _reference_world(start):
-    """The reference world built directly from pusht.md with pymunk (independently of the env)."""
+    """The reference world built directly with pymunk from the reference semantics (Chi et al. 2023's
+    ``pusht_env.py``, as listed in ``coursekit/envs/pusht.py``), independently of the env."""
     import pymunk
 
     space = pymunk.Space()

@@ -23,7 +23,7 @@ from coursekit.viz.replay import (  # noqa: E402
 
 @pytest.fixture(scope="module")
 def scene():
-    from coursekit.viz.meshcat_scene import MeshcatScene
+    from coursekit.viz.meshcat.scene import MeshcatScene
 
     with MeshcatScene() as s:
         yield s
@@ -77,7 +77,7 @@ def assert_self_contained(page: str) -> None:
 
 def test_pusht_replay_follows_the_recorded_states(tmp_path, scene, pusht_episodes):
     from coursekit.envs.pusht_render import PushTRenderer
-    from coursekit.viz.meshcat_pusht import PushTMeshcat
+    from coursekit.viz.meshcat.pusht import PushTMeshcat
 
     out = write_replay(tmp_path / "rec", "pusht", pusht_episodes, scene=scene)
     assert out == {"html": tmp_path / "rec" / "replay.html", "frames": tmp_path / "rec" / "frames.png"}

@@ -16,7 +16,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 pytest.importorskip("meshcat")
 from PIL import Image  # noqa: E402
 
-from coursekit.viz.browser import screenshot_html  # noqa: E402
+from headless_chromium import screenshot_html  # noqa: E402
 from coursekit.viz.replay import EpisodeRecording, write_replay  # noqa: E402
 
 pytestmark = pytest.mark.browser

@@ -6,6 +6,7 @@ uses (50 held-out episodes, the checkpoint's own sampler/executor, one torch thr
 evaluation is deterministic by seed, but a different CPU (or thread count) rounds the network's
 sums differently and a contact-rich rollout can amplify that, so the comparison allows a small
 tolerance: a few episodes' worth, far below the gap a wrong or stale checkpoint would show.
+Each reproduction takes minutes: they are marked ``slow`` (``make test`` runs them, ``make test-fast`` not).
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ def test_every_shipped_checkpoint_has_a_results_row():
         assert row in RESULTS, f"README results table lacks {row!r}: run its benchmark"
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(600)
 @pytest.mark.parametrize("name,row,key,scale,tol", CASES, ids=[c[0] for c in CASES])
 def test_shipped_checkpoint_reproduces_readme_row(name, row, key, scale, tol, tmp_path, capsys):

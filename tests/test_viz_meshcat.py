@@ -27,9 +27,10 @@ mujoco = pytest.importorskip("mujoco")
 umsgpack = pytest.importorskip("umsgpack")
 
 from coursekit.envs import pusht_geometry as geo  # noqa: E402
-from coursekit.viz.meshcat_pusht import PushTMeshcat, body_transform, export_pusht_rollout, to_meshcat_xy  # noqa: E402
-from coursekit.viz.meshcat_scene import MeshcatScene, pose_matrix  # noqa: E402
-from coursekit.viz.mujoco_meshcat import GEOM_GALLERY_XML, MujocoMeshcat, capsule_mesh, geom_rgba  # noqa: E402
+from coursekit.viz.meshcat import server  # noqa: E402
+from coursekit.viz.meshcat.mujoco_model import GEOM_GALLERY_XML, MujocoMeshcat, capsule_mesh, geom_rgba  # noqa: E402
+from coursekit.viz.meshcat.pusht import PushTMeshcat, body_transform, export_pusht_rollout, to_meshcat_xy  # noqa: E402
+from coursekit.viz.meshcat.scene import MeshcatScene, pose_matrix  # noqa: E402
 from coursekit.viz.notebook import iframe_html, show_html  # noqa: E402
 
 # geoms of GEOM_GALLERY_XML that are drawn (not the group-3 or the alpha-0 one)
@@ -77,7 +78,7 @@ def _server_gone(pid: int, timeout: float = 5.0) -> bool:
 
 # -- package and server lifetime --------------------------------------------------------------------
 def test_viz_import_does_not_pull_meshcat_or_mujoco():
-    code = ("import sys, coursekit.viz, coursekit.viz.notebook, coursekit.viz.browser; "
+    code = ("import sys, coursekit.viz, coursekit.viz.notebook, coursekit.viz.meshcat, coursekit.viz.scrubbers; "
             "print(sorted(m for m in ('meshcat', 'mujoco', 'torch') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True).stdout
     assert out.strip() == "[]"
@@ -87,7 +88,7 @@ def test_close_kills_the_server_and_is_idempotent():
     s = MeshcatScene()
     pid = s.server_pid
     proc = psutil.Process(pid)
-    assert proc.is_running() and "meshcat_server.py" in " ".join(proc.cmdline())
+    assert proc.is_running() and str(server.SCRIPT) in proc.cmdline()
     s.close()
     assert _server_gone(pid)
     s.close()  # twice is fine
@@ -106,7 +107,7 @@ def test_context_manager_closes_on_error():
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="parent-death signal is Linux-only")
 def test_server_dies_when_its_parent_is_sigkilled():
-    code = ("import time; from coursekit.viz.meshcat_scene import MeshcatScene; "
+    code = ("import time; from coursekit.viz.meshcat.scene import MeshcatScene; "
             "s = MeshcatScene(); print(s.server_pid, flush=True); time.sleep(120)")
     parent = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE)
     try:

@@ -133,7 +133,7 @@ def _train(args: argparse.Namespace, lock: Any) -> int:
     from coursekit.policies import get_policy_class
     from coursekit.policies.factory import make_policy
     from coursekit.train import TrainConfig, train
-    from coursekit.viz.run_log import MetricsLog
+    from coursekit.training_log import MetricsLog
 
     fields = _config_fields(args)
     _check_flags_apply(args, {f.name for f in dataclasses.fields(get_policy_class(args.policy).config_class)}, fields)
@@ -185,7 +185,7 @@ def run_dir_foreign(path: Path) -> str | None:
     """
     from coursekit.checkpoint import CONFIG_FILE, WEIGHTS_FILE, is_checkpoint_dir
     from coursekit.outputs import regular_file
-    from coursekit.viz.run_log import COLUMNS, LOSS_PLOT_NAME, METRICS_NAME
+    from coursekit.training_log import COLUMNS, LOSS_PLOT_NAME, METRICS_NAME
 
     names = sorted(p.name for p in path.iterdir())
     for name in names:

@@ -2,7 +2,7 @@
 
 A re-implementation of the task used by the Diffusion Policy paper (its ``pusht_env.py``) and
 by the gym-pusht package, keeping the reference semantics so that published PushT scores stay
-comparable (facts in ``shared/reference/pusht.md``; geometry in ``pusht_geometry.py``):
+comparable (the semantics below; geometry in ``pusht_geometry.py``):
 
 - 512 x 512 world, y down; four static walls from (5, 5) to (506, 506), radius 2.
 - Gravity 0 and ``space.damping = 0``: pymunk multiplies every dynamic body's velocity by

@@ -2,7 +2,7 @@
 
 No physics here (no pymunk), so plotting, planners and tests can use the geometry on its own.
 
-Conventions (those of the reference environment, see ``shared/reference/pusht.md``):
+Conventions (those of the reference environment: Chi et al. 2023's ``pusht_env.py`` and gym-pusht):
 
 - The world is 512 x 512 units (= pixels of the reference renderer), x to the right, y DOWN
   (image convention). A pose is ``(x, y, angle)``: the world position of the block's BODY

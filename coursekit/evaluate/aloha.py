@@ -1,10 +1,20 @@
 """``evaluate_aloha``: a policy on an arm-pair task by ACT's protocol (``coursekit.tasks.aloha``).
 
-Episodes of ``EPISODE_STEPS`` (400) control steps from held-out spawn seeds (100000 + i;
-demonstrations use small seeds); ``info`` reports ACT's per-stage success rates and the strict
-final-state success (see ``coursekit.tasks.aloha``). The env's reward is the stage, so
-``EvalResult.score`` is the mean highest stage (0..4) and ``success_rate`` the published
-(lenient) success.
+Protocol (Zhao et al. 2023, Sec. V): episodes of ``EPISODE_STEPS`` (400) control
+steps from held-out spawn seeds (100000 + i; demonstrations use small seeds). Each task has four
+reward stages (transfer cube: touched, lifted, received, held by the left gripper; insertion:
+both grasped, both lifted, peg touches socket, inserted). Reported:
+
+- ``stage_rates[s]`` for s = 1..4: fraction of episodes whose stage reached >= s at some step
+  (the paper's table); stage 4 at any step is the published (lenient) success;
+- ``strict_success_rate``: fraction of episodes whose FINAL state is a finished task (the cube
+  still held, the peg still in the socket) — the stricter judgement the demonstrations pass.
+
+The env's reward is the stage, so ``EvalResult.score`` is the mean highest stage (0..4) and
+``success_rate`` the published (lenient) success.
+
+The task's record (``coursekit.tasks.aloha``) plugs the arm pair into
+:func:`coursekit.evaluate.closed_loop.evaluate` (B environments in lock-step, any policy, any executor).
 """
 
 from __future__ import annotations

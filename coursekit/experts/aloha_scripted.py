@@ -9,8 +9,8 @@ The recipe of ACT (Zhao et al. 2023, Sec. V and ``record_sim_episodes.py``):
    the replay is the demonstration;
 3. keep the episode only if the replay succeeds STRICTLY (judged on its final state).
 
-Departures from the original script, each needed for a reliable strict success (see
-``shared/reference/act_aloha.md``, prototype lessons): the right gripper stays closed until step
+Departures from the original script, each made for a reliable strict success (the strict success
+they give is measured by ``benchmarks/bench_aloha.py``): the right gripper stays closed until step
 310 and opens over 310-330 (the original opens at 220, before the left gripper has closed); grasps
 aim about 1 cm above the object centre so the pitched pads clear the table; the pick orientation
 is built in each arm's own frame (the right arm is yawed by pi); for insertion the grippers close

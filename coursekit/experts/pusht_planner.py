@@ -1,8 +1,9 @@
 """A scripted PushT expert: plan a push, walk round the T to it, push, repeat, then rest.
 
 The paper's 206 human demonstrations cannot be downloaded, so the course makes its own with
-this planner (the ideas are in ``shared/reference/pusht.md``, "A scripted expert that works";
-plain sampling MPC on raw pusher targets solves only about 10 % of resets). One episode:
+this planner, built on the task's own physics (``pusht_push_model``): contact is rare, so
+sampling MPC on raw pusher targets cannot plan "go round, then push".
+``benchmarks/bench_pusht_expert.py`` measures its success, speed and route choices. One episode:
 
 1. settle    if the reset left the T in a wall or under the pusher, hold still until the
              physics has pushed them apart, then step out of the T's way;
@@ -18,7 +19,8 @@ plain sampling MPC on raw pusher targets solves only about 10 % of resets). One 
              off, whichever the simulator says is better; repeat from 2 until coverage > 0.95
              at a moment when the T will stay put (``final_coverage`` after resting);
 5. rest      a few steps with the target on the pusher's own position, so that learned
-             policies see when to stop (see the lessons in ``diffusion_policy.md``).
+             policies see when to stop (demonstrations that end at the first step over 0.95
+             teach a policy never to stop: near the goal it keeps pushing the block away).
 
 Targets move at most ``travel_speed`` px per 10 Hz step and brake before turns and at the
 end, the way a hand would. Everything is deterministic given the reset seed and coin seed.

@@ -1,6 +1,6 @@
 """Where can the pusher push the T, and where will the T go? A quasi-static push model.
 
-PushT's physics makes pushing predictable (``shared/reference/pusht.md``):
+PushT's physics makes pushing predictable (the semantics in ``coursekit/envs/pusht.py``):
 
 - ``space.damping = 0`` zeroes the block's velocity every substep: the T moves only while it
   is pressed, and stops the moment the pusher stops (quasi-static pushing).

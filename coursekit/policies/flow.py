@@ -109,7 +109,7 @@ class FlowMatchingPolicy(IterativeUNetPolicy):
     policy_type = "flow"
     config_class = FlowMatchingPolicyConfig
     config: FlowMatchingPolicyConfig
-    sampling_options = ("sampler", "num_inference_steps", "steps", "return_trajectory", "step_fn")
+    sampling_options = ("sampler", "num_inference_steps", "return_trajectory", "step_fn")
 
     def velocity(self, x_t: torch.Tensor, t: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
         """v_theta: chunk x_t (B, Tp, Da), times t (B,) in [0, 1], condition (B, cond_dim) -> (B, Tp, Da)."""
@@ -145,29 +145,26 @@ class FlowMatchingPolicy(IterativeUNetPolicy):
         method = sampling.get("sampler") or self.config.integration_method
         if method not in METHODS:
             raise ValueError(f"sampler must be one of {METHODS} for a flow policy, got {method!r}")
-        steps = self._steps(sampling.get("steps"), sampling.get("num_inference_steps"))
+        steps = self._steps(sampling.get("num_inference_steps"))
         return {"sampler": method, "num_inference_steps": steps,
                 "network_calls": steps * (2 if method == "midpoint" else 1)}
 
-    def _steps(self, steps: int | None, num_inference_steps: int | None) -> int:
-        """N from the two spellings of the option (None: the config's), checked."""
-        if steps is not None and num_inference_steps is not None and steps != num_inference_steps:
-            raise ValueError(f"give steps or num_inference_steps, not both ({steps} != {num_inference_steps})")
-        n = steps if steps is not None else num_inference_steps
+    def _steps(self, n: int | None) -> int:
+        """N: ``num_inference_steps`` as given (checked) or, when None, the config's."""
         return self.config.num_inference_steps if n is None else check_steps(n)
 
     @torch.no_grad()
     def predict_chunk(self, obs_history: Any, *, generator: torch.Generator | None = None, sampler: str | None = None,
-                      num_inference_steps: int | None = None, steps: int | None = None,
-                      return_trajectory: bool = False, step_fn: Callable[..., torch.Tensor] | None = None) -> Any:
+                      num_inference_steps: int | None = None, return_trajectory: bool = False,
+                      step_fn: Callable[..., torch.Tensor] | None = None) -> Any:
         """Raw history (B, To, Do) (or dict for images; or unbatched (To, Do)) -> raw chunk (B, Tp, Da).
 
         Numpy in, numpy out; tensors in, tensors out. ``sampler`` ('euler'/'midpoint') and
-        ``num_inference_steps`` (alias ``steps``) override the config; x_1 comes from ``generator``
+        ``num_inference_steps`` override the config; x_1 comes from ``generator``
         (None: global generator). ``step_fn`` replaces the integration step (e.g. a student's
         ``euler_step``). With ``return_trajectory`` also returns the path (N+1, B, Tp, Da) in raw units.
         """
-        n = self._steps(steps, num_inference_steps)
+        n = self._steps(num_inference_steps)
         method = sampler or self.config.integration_method
         if method not in METHODS:
             raise ValueError(f"sampler must be one of {METHODS} for a flow policy, got {method!r}")

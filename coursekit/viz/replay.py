@@ -45,7 +45,7 @@ from coursekit.viz.replay_viewers import viewer_for
 
 if TYPE_CHECKING:
     from coursekit.output_lock import OutputLock
-    from coursekit.viz.meshcat_scene import MeshcatScene
+    from coursekit.viz.meshcat.scene import MeshcatScene
 
 HOLD_S = 1.0
 """Seconds the replay holds each episode's final state before the next one starts."""
@@ -193,7 +193,7 @@ def _caption_overlay(task: str, episodes: list[EpisodeRecording], starts_s: list
 
 def replay_html(viewer: Any, episodes: list[EpisodeRecording], fps: float, scene: MeshcatScene | None = None) -> str:
     """The replay page as a string (see the module docstring), drawn by the task's ``viewer``."""
-    from coursekit.viz.meshcat_scene import MeshcatScene
+    from coursekit.viz.meshcat.scene import MeshcatScene
 
     starts, hold = timeline([len(ep.states) for ep in episodes], fps)
     states = _played_states(episodes, hold)  # (F, S)

@@ -1,16 +1,10 @@
-"""One meshcat server per process, owned, framed for the camera and closed cleanly.
+"""One meshcat scene per process, owned, framed for the camera and closed cleanly.
 
-meshcat 0.3.2 has no in-process mode: ``meshcat.Visualizer()`` starts a server SUBPROCESS (zmq on
-127.0.0.1:6000+, http on 7000+ on EVERY network interface). meshcat kills it at a normal
-interpreter exit, but after a SIGTERM/SIGKILL of the parent (a killed notebook kernel, a timed-out
-test) it is orphaned and keeps its ports. So this module starts the server itself
-(:mod:`coursekit.viz.meshcat_server`: meshcat's bridge, listening on 127.0.0.1 only) and
-
-- kills it in :meth:`MeshcatScene.close` (also registered with ``atexit``, and run by ``with``);
-- hands it the read end of a pipe whose write end only this process holds: when this process
-  dies, however and from whichever thread the scene was made, the kernel closes the write end
-  and the server exits (on Linux, a scene made on the main thread also gets a parent-death
-  SIGKILL; that signal fires when the starting *thread* ends, so it is not used from others).
+A :class:`MeshcatScene` is a ``meshcat.Visualizer`` connected to its own server process
+(:class:`coursekit.viz.meshcat.server.MeshcatServer`: listening on 127.0.0.1 only, and dying
+with this process however it dies). :meth:`MeshcatScene.close` kills the server; it is also
+registered with ``atexit`` and run by ``with``. :func:`shared_scene` hands out one scene per
+process, which the course's viewers share.
 
 Everything the course shows is exported with :meth:`MeshcatScene.static_html`: one self-contained
 HTML file (about 0.9 MB; three.js is inlined) with the scene and its animation, which works
@@ -26,14 +20,8 @@ from __future__ import annotations
 
 import atexit
 import contextlib
-import ctypes
 import io
 import os
-import signal
-import subprocess
-import sys
-import threading
-import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import ClassVar
@@ -43,75 +31,12 @@ import numpy as np
 import zmq
 
 from coursekit.atomic import atomic_write_text
+from coursekit.viz.meshcat.server import MeshcatServer
 
 # The camera object meshcat's viewer creates at start-up (see meshcat's viewer ``create_camera``).
 CAMERA_PATH = "/Cameras/default/rotated/<object>"
-# Seconds to wait for the server to print its URLs before giving up.
-_START_TIMEOUT_S = 30.0
-_PR_SET_PDEATHSIG = 1  # from <linux/prctl.h>
 # Milliseconds to wait for the server's reply to one command (static_html of a big scene included).
 _REPLY_TIMEOUT_MS = 60_000
-
-
-def _die_with_parent() -> None:
-    """Run in the child between fork and exec: SIGKILL me when my parent dies (Linux only)."""
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
-    except (OSError, AttributeError):  # not Linux: fall back to close()/atexit only
-        pass
-
-
-def _start_server() -> tuple[subprocess.Popen, str, str, int]:
-    """Start :mod:`coursekit.viz.meshcat_server`; return (process, zmq_url, web_url, lifeline fd).
-
-    The lifeline is the write end of the pipe the server watches: keep it open while the server
-    should live; closing it (or this process dying) makes the server exit.
-    """
-    in_main_thread = threading.current_thread() is threading.main_thread()
-    env = dict(os.environ)
-    # meshcat passes its own location on PYTHONPATH (robust when it was added by sys.path hacks).
-    env["PYTHONPATH"] = os.path.dirname(os.path.dirname(meshcat.__file__))
-    read_end, lifeline = os.pipe()  # both non-inheritable (PEP 446): only the server gets read_end
-    try:
-        proc = subprocess.Popen(
-            [sys.executable, "-u", str(Path(__file__).with_name("meshcat_server.py")), "--parent-pipe", str(read_end)],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.DEVNULL,  # the server logs each websocket; nobody reads it, never let it block
-            env=env,
-            pass_fds=(read_end,),
-            start_new_session=True,  # a Ctrl-C in a notebook cell must not take the server down
-            # the parent-death signal fires when the STARTING THREAD ends: only ask for it from the
-            # main thread (the pipe covers every thread)
-            preexec_fn=_die_with_parent if sys.platform.startswith("linux") and in_main_thread else None,
-        )
-    except BaseException:
-        os.close(lifeline)
-        raise
-    finally:
-        os.close(read_end)
-    deadline = time.monotonic() + _START_TIMEOUT_S
-    zmq_url = web_url = None
-    while web_url is None:
-        line = proc.stdout.readline().decode("utf-8", "replace").strip()
-        if line.startswith("zmq_url="):
-            zmq_url = line.split("=", 1)[1]
-        elif line.startswith("web_url="):
-            web_url = line.split("=", 1)[1]
-        elif not line and proc.poll() is not None:
-            os.close(lifeline)
-            raise RuntimeError(f"the meshcat server exited at start-up with code {proc.returncode}")
-        if time.monotonic() > deadline:
-            proc.kill()
-            proc.wait()
-            os.close(lifeline)
-            raise RuntimeError(f"the meshcat server did not start within {_START_TIMEOUT_S:.0f} s")
-    if zmq_url is None:
-        proc.kill()
-        proc.wait()
-        os.close(lifeline)
-        raise RuntimeError("the meshcat server printed a web URL but no zmq URL")
-    return proc, zmq_url, web_url, lifeline
 
 
 def translation(xyz: Sequence[float]) -> np.ndarray:
@@ -152,14 +77,15 @@ class MeshcatScene:
     """The scene handed out by :func:`shared_scene` (one server per process)."""
 
     def __init__(self) -> None:
-        self._proc, zmq_url, self.web_url, self._lifeline = _start_server()
-        self.server_pid: int = self._proc.pid
+        self._server = MeshcatServer()
+        self.server_pid: int = self._server.pid
+        self.web_url: str = self._server.web_url
         atexit.register(self.close)
         try:
             # Visualizer(zmq_url=...) connects to our server instead of starting its own; it
             # prints the URL on stdout, which would only clutter notebooks and test logs.
             with contextlib.redirect_stdout(io.StringIO()):
-                self.vis = meshcat.Visualizer(zmq_url=zmq_url)
+                self.vis = meshcat.Visualizer(zmq_url=self._server.zmq_url)
             # meshcat waits for every reply without a limit: a dead server would hang the caller
             # forever. With a timeout it raises zmq.Again instead (and the scene must be remade).
             self.vis.window.zmq_socket.setsockopt(zmq.RCVTIMEO, _REPLY_TIMEOUT_MS)
@@ -172,23 +98,17 @@ class MeshcatScene:
     @property
     def closed(self) -> bool:
         """True once :meth:`close` ran (the server is dead and the Visualizer unusable)."""
-        return self._proc is None
+        return self._server.closed
 
     def close(self) -> None:
-        """Kill the server process and close the zmq socket. Safe to call twice."""
-        proc, self._proc = self._proc, None
-        if proc is None:
+        """Close the zmq socket and kill the server process. Safe to call twice."""
+        if self._server.closed:
             return
         atexit.unregister(self.close)
         window = getattr(getattr(self, "vis", None), "window", None)
         if window is not None:
             window.zmq_socket.close(linger=0)
-        if proc.poll() is None:
-            proc.kill()
-        proc.wait(timeout=10)
-        os.close(self._lifeline)
-        if proc.stdout is not None:
-            proc.stdout.close()
+        self._server.close()
 
     def __enter__(self) -> MeshcatScene:
         return self

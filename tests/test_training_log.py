@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from coursekit.viz.run_log import COLUMNS, DPI, FIG_SIZE_IN, MetricsLog, plot_metrics, read_metrics, summary_title
+from coursekit.training_log import COLUMNS, DPI, FIG_SIZE_IN, MetricsLog, plot_metrics, read_metrics, summary_title
 
 
 def records(n: int, start: int = 1) -> list[dict[str, float]]:

@@ -27,7 +27,7 @@ from meshcat.animation import Animation
 from coursekit.envs import pusht_geometry as geo
 from coursekit.envs.pusht_render import AGENT_COLOR, BLOCK_COLOR, BLOCK_OUTLINE, GOAL_COLOR, TARGET_COLOR, WALL_COLOR
 from coursekit.tasks.pusht import PUSHT
-from coursekit.viz.meshcat_scene import MeshcatScene, pose_matrix, shared_scene, translation
+from coursekit.viz.meshcat.scene import MeshcatScene, pose_matrix, shared_scene, translation
 
 UNIT = 1.0 / geo.WORLD_SIZE
 """Metres per PushT unit: the arena is 1 m across."""

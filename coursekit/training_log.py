@@ -1,12 +1,15 @@
 """A training run a person can read: ``metrics.csv`` row by row and a ``loss.png`` that keeps up.
 
-:class:`MetricsLog` is the training callback's sink: ``on_log(record)`` appends one row
+:class:`MetricsLog` is a trainer callback (:class:`coursekit.train.TrainCallback`, passed as
+``train(..., callbacks=[log])``; ``coursekit train`` writes one beside every checkpoint): each
+``on_log(record)`` appends one row
 
     step, loss, lr, samples_per_s, wall_s
 
 to ``<run_dir>/metrics.csv`` (header once, flushed after every row, so a run killed half-way keeps
 every row it logged) and re-draws ``<run_dir>/loss.png`` at most every ``plot_every_s`` seconds;
-``close()`` draws the final figure. The figure is written atomically (temporary file +
+``close()`` draws the final figure. The figure is the log's live view, so it is drawn here (the
+trainer's layer) rather than in :mod:`coursekit.viz`. It is written atomically (temporary file +
 ``os.replace``), so an image viewer open on it never sees half a PNG.
 
 The log never takes over a file it did not create: if ``metrics.csv`` or ``loss.png`` already
@@ -151,7 +154,7 @@ class MetricsLog:
     """Append training records to ``run_dir/metrics.csv`` and keep ``run_dir/loss.png`` up to date.
 
     >>> with MetricsLog(run_dir) as log:               # doctest: +SKIP
-    ...     train(..., on_log=log.on_log)                # each record: step, loss, lr, samples_per_s, wall_s
+    ...     train(policy, batches, config, callbacks=[log])  # each record: step, loss, lr, samples_per_s, wall_s
 
     Args:
         run_dir: the run folder (created if missing). It must not already hold ``metrics.csv``

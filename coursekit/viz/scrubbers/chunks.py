@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from coursekit.viz.widgets import FigureScrubber
+from coursekit.viz.scrubbers.figure import FigureScrubber
 
 __all__ = ["ChunkRollout", "chunk_replay", "record_chunk_rollouts"]
 

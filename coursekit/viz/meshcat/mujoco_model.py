@@ -46,7 +46,7 @@ import numpy as np  # noqa: E402
 from meshcat.animation import Animation, AnimationClip, AnimationTrack  # noqa: E402
 
 from coursekit.tasks.aloha import CONTROL_HZ  # noqa: E402
-from coursekit.viz.meshcat_scene import MeshcatScene, pose_matrix, rgb_hex, shared_scene, translation  # noqa: E402
+from coursekit.viz.meshcat.scene import MeshcatScene, pose_matrix, rgb_hex, shared_scene, translation  # noqa: E402
 
 _T = mujoco.mjtGeom
 DEFAULT_RGBA = (0.5, 0.5, 0.5, 1.0)

@@ -1,11 +1,14 @@
-"""Screenshots of exported HTML in a real (headless) chromium: proof that a page really draws.
+"""Test helper: screenshots of exported HTML in a real (headless) chromium, proof that a page draws.
 
 meshcat's exported pages draw with WebGL. Headless chromium on a machine without a GPU renders
-them through SwiftShader (the CPU WebGL backend) when given the flags below, in about 1.3 s for a
-meshcat page (measured, see ``stack.md``). ``--virtual-time-budget`` lets the page's scripts and
-animation frames run for that many milliseconds of *virtual* time before the picture is taken.
+them through SwiftShader (the CPU WebGL backend) when given the flags below (a few seconds a
+page; ``pytest tests/test_browser.py --durations=0`` times them on your machine).
+``--virtual-time-budget`` lets the page's scripts and animation frames run for that many
+milliseconds of *virtual* time before the picture is taken.
 
-Debian's package is ``chromium`` (``/usr/bin/chromium``); ``make test`` installs it when missing.
+Debian's package is ``chromium`` (``/usr/bin/chromium``); ``make test`` installs it when missing
+(``make browser``). Only the tests use this module (``from headless_chromium import ...``: pytest
+puts ``tests/`` on the path).
 """
 
 from __future__ import annotations
@@ -14,7 +17,6 @@ import os
 import shutil
 import subprocess
 import tempfile
-import time
 from pathlib import Path
 
 # Where the Debian/Ubuntu packages put the browser, first match wins.
@@ -38,7 +40,7 @@ def find_chromium() -> str | None:
 
 def chromium_command(chromium: str, html_path: Path, png_path: Path, user_data_dir: Path,
                      window_size: tuple[int, int], budget_ms: int) -> list[str]:
-    """The command line that is known to render WebGL here (flags exactly as in ``stack.md``)."""
+    """The command line that renders WebGL headless on a CPU-only machine (SwiftShader)."""
     width, height = window_size
     return [
         chromium,
@@ -108,9 +110,3 @@ def screenshot_html(html_path: str | os.PathLike, png_path: str | os.PathLike,
                            f"{'an' if png_path.is_file() else 'no'} image for {html_path}:\n{tail}")
     return png_path
 
-
-def timed_screenshot(html_path: str | os.PathLike, png_path: str | os.PathLike, **kwargs) -> tuple[Path, float]:
-    """:func:`screenshot_html` and the wall-clock seconds it took (for benchmarks and reports)."""
-    start = time.perf_counter()
-    path = screenshot_html(html_path, png_path, **kwargs)
-    return path, time.perf_counter() - start

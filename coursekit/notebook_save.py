@@ -2,7 +2,7 @@
 
 `make lab` starts JupyterLab with this pre-save hook::
 
-    jupyter lab notebooks/ --ContentsManager.pre_save_hook=coursekit.viz.notebook_save.strip_before_save
+    jupyter lab notebooks/ --ContentsManager.pre_save_hook=coursekit.notebook_save.strip_before_save
 
 An open notebook keeps its outputs on screen; only the file written to disk loses them (and the
 editor metadata JupyterLab adds: language_info, widget state, execution timings). The file then
@@ -40,7 +40,6 @@ def strip_notebook(nb: Any) -> Any:
     node = nbformat.from_dict(nb)
     return strip_output(node, keep_output=False, keep_count=False, keep_id=True,
                         extra_keys=list(NBSTRIP_KEYS_ALL))
-
 
 
 def strip_before_save(model: dict[str, Any], path: str = "", **_: Any) -> None:

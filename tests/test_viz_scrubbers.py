@@ -12,7 +12,8 @@ import pytest
 
 pytest.importorskip("ipywidgets")
 
-from coursekit.viz.widgets import FigureScrubber, ensemble_actions, ensemble_scrubber  # noqa: E402
+from coursekit.viz.scrubbers.ensembling import ensemble_actions, ensemble_scrubber  # noqa: E402
+from coursekit.viz.scrubbers.figure import FigureScrubber  # noqa: E402
 
 
 def test_scrubber_redraws_in_place():
@@ -67,7 +68,7 @@ def tiny_dp():
 
 
 def test_chunk_replay_follows_the_receding_horizon_contract(tiny_dp):
-    from coursekit.viz.widgets_chunks import chunk_replay, record_chunk_rollouts
+    from coursekit.viz.scrubbers.chunks import chunk_replay, record_chunk_rollouts
 
     runs = record_chunk_rollouts(tiny_dp, seed=100_000, n_action_steps=(1, 5), max_steps=12)
     to, tp = tiny_dp.config.n_obs_steps, tiny_dp.config.horizon
@@ -91,7 +92,7 @@ def test_chunk_replay_follows_the_receding_horizon_contract(tiny_dp):
 def test_cvae_scrubber_decodes_the_chosen_z():
     torch = pytest.importorskip("torch")
     from coursekit.policies.act import ACTConfig, ACTPolicy
-    from coursekit.viz.widgets import cvae_scrubber
+    from coursekit.viz.scrubbers.cvae import cvae_scrubber
 
     torch.manual_seed(0)
     K = 5
@@ -114,7 +115,7 @@ def test_cvae_scrubber_decodes_the_chosen_z():
 
 
 def test_delay_scrubber_follows_the_delayed_executors():
-    from coursekit.viz.widgets_delay import delay_scrubber, play_delay
+    from coursekit.viz.scrubbers.delay import delay_scrubber, play_delay
 
     # d = 0: synchronous and naive async are both plain receding horizon (a chunk every Ta = 4)
     sync0, sw0 = play_delay("synchronous", 0, steps=12)

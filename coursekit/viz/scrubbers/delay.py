@@ -17,7 +17,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from coursekit.execution.delay import AsyncChunking, DelayedEnsemble, Synchronous
-from coursekit.viz.widgets import FigureScrubber
+from coursekit.viz.scrubbers.figure import FigureScrubber
 
 __all__ = ["DisagreeingChunks", "delay_scrubber", "play_delay"]
 
