@@ -51,7 +51,7 @@ def test_grade_cli_rejects_bad_input(tmp_path, capsys):
     assert main(["grade", str(tmp_path / "nope"), "--out", str(tmp_path / "out")]) == 2
     assert "does not exist" in capsys.readouterr().err
     assert main(["grade", str(tmp_path), "--out", str(tmp_path / "out"), "--jobs", "0"]) == 2
-    assert "argument --jobs: must be an integer >= 1, got '0'" in capsys.readouterr().err
+    assert "argument --jobs: must be an integer in [1, 256], got '0'" in capsys.readouterr().err
     assert main(["grade", str(tmp_path), "--out", str(tmp_path / "out"), "--timeout", "-1"]) == 2
     assert "argument --timeout: must be a finite number > 0, got '-1'" in capsys.readouterr().err
     (tmp_path / "subs").mkdir()  # --out must be outside the submissions folder (coursekit.outputs)

@@ -1,19 +1,22 @@
 """The output policy of ``coursekit export lerobot`` and ``coursekit import lerobot``, in one place.
 
-Both commands check their output before reading anything (``coursekit.outputs.check_output``),
-remove what killed earlier runs left beside it, and write atomically: the export folder is built
-in a hidden staging folder and swapped into place (``staging_dir`` + ``replace_dir``); the
-imported .npz is written by ``EpisodeDataset.save`` (temporary file + rename).
+Both commands claim their output before reading anything (``coursekit.outputs.claim_output``:
+checked, then locked for the whole run, with what killed earlier runs left beside it swept), and
+write atomically: the export folder is built in a recorded staging folder and swapped into place
+(``staging_dir`` + ``replace_dir``); the imported .npz is written by ``EpisodeDataset.save``
+(recorded temporary file + rename) under the same lock.
 """
 
 from __future__ import annotations
 
+import contextlib
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
-from coursekit.outputs import check_output, clean_leftovers, replace_dir, staging_dir
+from coursekit.output_lock import OutputLock
+from coursekit.outputs import claim_output, replace_dir, staging_dir
 
 
 def require_pyarrow() -> None:
@@ -24,34 +27,42 @@ def require_pyarrow() -> None:
         raise ValueError("LeRobot's format needs the pyarrow package: pip install pyarrow") from None
 
 
-def _clean(out: Path) -> None:
-    for leftover in clean_leftovers(out):
-        print(f"removed {str(leftover)!r}, left by an interrupted earlier run", file=sys.stderr)
-
-
-def check_export_out(out: Path, data: Path, overwrite: bool) -> None:
-    """Before any work: OUT_DIR is new, empty, or (with --overwrite) an earlier export; never the input."""
-    require_pyarrow()
+def _export_foreign(path: Path) -> str | None:
     from coursekit.data.lerobot_export import is_lerobot_export
 
-    check_output(out, what="coursekit LeRobot export", is_ours=is_lerobot_export, directory=True,
-                 overwrite=overwrite, inputs=[data], flag="OUT_DIR")
+    return None if is_lerobot_export(path) else "it has no meta/info.json and meta/coursekit.json of an export"
 
 
-def write_export_folder(out: Path, write: Callable[[Path], Any]) -> Any:
+def _dataset_foreign(path: Path) -> str | None:
+    from coursekit.data.episodes import is_dataset_file
+
+    return None if is_dataset_file(path) else "it lacks the members every coursekit dataset has"
+
+
+@contextlib.contextmanager
+def _claimed(out: Path, **policy: Any) -> Iterator[OutputLock]:
+    require_pyarrow()
+    with claim_output(out, **policy) as lock:
+        for leftover in lock.swept:
+            print(f"removed {str(leftover)!r}, left by an interrupted earlier run", file=sys.stderr)
+        yield lock
+
+
+def claim_export_out(out: Path, data: Path, overwrite: bool) -> contextlib.AbstractContextManager[OutputLock]:
+    """Before any work: OUT_DIR is new, empty, or (with --overwrite) an earlier export; never the input."""
+    return _claimed(out, what="coursekit LeRobot export", foreign=_export_foreign, directory=True,
+                    overwrite=overwrite, inputs=[data], flag="OUT_DIR")
+
+
+def write_export_folder(out: Path, lock: OutputLock, write: Callable[[Path], Any]) -> Any:
     """Run ``write(folder)`` in a staging folder beside ``out``, then swap it into place; returns its result."""
-    _clean(out)
-    with staging_dir(out) as tmp:
+    with staging_dir(out, lock) as tmp:
         result = write(tmp)
-        replace_dir(tmp, out)  # the old export (if any) ends up in tmp and is removed with it
+        replace_dir(tmp, out, lock)  # the old export (if any) ends up in tmp and is removed with it
     return result
 
 
-def check_import_out(out: Path, folder: Path, overwrite: bool) -> None:
+def claim_import_out(out: Path, folder: Path, overwrite: bool) -> contextlib.AbstractContextManager[OutputLock]:
     """Before any work: OUT is a new .npz, or (with --overwrite) a coursekit data set; never inside the input."""
-    require_pyarrow()
-    from coursekit.data.episodes import is_dataset_file
-
-    check_output(out, what="coursekit dataset", is_ours=is_dataset_file, directory=False, overwrite=overwrite,
-                 inputs=[folder], flag="OUT")
-    _clean(out)
+    return _claimed(out, what="coursekit dataset", foreign=_dataset_foreign, directory=False, overwrite=overwrite,
+                    inputs=[folder], flag="OUT")

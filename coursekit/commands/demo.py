@@ -149,8 +149,8 @@ def _check_demo_outputs(out: Path, args: argparse.Namespace) -> None:
 def _write_page(replayed, actions, path: Path, lock: Any) -> Path:
     """The replay as a 3-D meshcat animation, one self-contained HTML page (marked as the tour's)."""
     from coursekit.atomic import atomic_write_text
-    from coursekit.viz.meshcat_pusht import PushTMeshcat
-    from coursekit.viz.meshcat_scene import MeshcatScene
+    from coursekit.viz.meshcat.pusht import PushTMeshcat
+    from coursekit.viz.meshcat.scene import MeshcatScene
 
     with MeshcatScene() as scene:  # its server is killed as soon as the page is drawn
         viewer = PushTMeshcat(scene, show_target=True)

@@ -119,6 +119,7 @@ def _check_record_episodes(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    _check_record_episodes(args)  # a flag error before anything is claimed
     with contextlib.ExitStack() as stack:
         locks = _claim_outputs(args, stack)
         return _evaluate(args, locks)
@@ -132,8 +133,6 @@ def _evaluate(args: argparse.Namespace, locks: dict[str, Any]) -> int:
     from coursekit.evaluate.result import EVAL_SEED_START, heldout_seeds
     from coursekit.evaluate.tasks import make_adapter, task_of
 
-    _check_record_episodes(args)
-    _check_outputs(args)
     if args.threads is not None:
         torch.set_num_threads(args.threads)
     info = read_checkpoint_info(args.checkpoint)

@@ -10,6 +10,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from coursekit.commands._args import output_path
+
 HELP = "read demonstrations from another format (lerobot: a local LeRobotDataset v3.0 folder)"
 
 
@@ -28,7 +30,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p = sub.add_parser("lerobot", help="a local LeRobotDataset v3.0 folder",
                        description="Read a local LeRobotDataset v3.0 folder into a coursekit data set (.npz).")
     p.add_argument("folder", type=Path, metavar="DIR", help="the LeRobot data set's folder (with meta/info.json)")
-    p.add_argument("out", type=Path, metavar="OUT", help="the .npz to write")
+    p.add_argument("out", type=output_path, metavar="OUT", help="the .npz to write")
     p.add_argument("--features", type=_feature_list, default=None,
                    help="LeRobot observation features to import, comma-separated (default: every one coursekit maps; "
                         "action always); on a coursekit export this maps by LeRobot's conventions instead of restoring")
@@ -39,14 +41,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from coursekit.commands._lerobot_io import check_import_out
+    from coursekit.commands._lerobot_io import claim_import_out
     from coursekit.data.lerobot_import import import_lerobot
 
-    check_import_out(args.out, args.folder, args.overwrite)
-    dataset, notes = import_lerobot(args.folder, features=args.features, as_task=args.as_task)
-    for note in notes:
-        print(f"note: {note}")
-    dataset.save(args.out)
+    with claim_import_out(args.out, args.folder, args.overwrite) as lock:
+        dataset, notes = import_lerobot(args.folder, features=args.features, as_task=args.as_task)
+        for note in notes:
+            print(f"note: {note}")
+        dataset.save(args.out, lock=lock)
     print(f"wrote {args.out}: {dataset.n_episodes} episodes, {dataset.n_steps} steps, arrays "
           f"{', '.join(f'{k}{tuple(v.shape[1:])}' for k, v in dataset.arrays.items())}; "
           f"train with: coursekit train --data {args.out} --out RUN --steps N")

@@ -51,8 +51,10 @@ def check_training_data(dataset: Any, features: str, source: str = "the dataset"
             raise ValueError(f"{source}: array {key!r} must hold numbers, got dtype {dataset[key].dtype} "
                              f"(first value {str(dataset[key].flat[0])[:30]!r})")
     action = dataset["action"]
-    want = TASK_ACTION_DIM[spec.task]
-    if action.ndim != 2 or action.shape[1] != want:
+    want = TASK_ACTION_DIM.get(spec.task)  # None: task-agnostic features (raw_state) fix no width
+    if action.ndim != 2 or (want is not None and action.shape[1] != want):
+        if want is None:
+            raise ValueError(f"{source}: 'action' has shape {action.shape}; actions must be (N, Da)")
         raise ValueError(f"{source}: 'action' has shape {action.shape}, the {spec.task} task takes actions of "
                          f"shape (N, {want}) ({_ACTION_NAMES[spec.task]}): demonstrations of another task?")
     for key in needed:

@@ -28,7 +28,7 @@ EPISODE_STEPS = 400
 """Control steps per episode (8 s): evaluation and the scripted demonstrations."""
 STATE_COLUMNS = ("stage", "strict_success", *(f"qpos_{i}" for i in range(14)))
 """First 16 columns of the state an arm-pair evaluation records per step; the rest (nq) is the full
-MuJoCo ``physics_qpos`` (for ``coursekit.viz.mujoco_meshcat`` animations and replays)."""
+MuJoCo ``physics_qpos`` (for ``coursekit.viz.meshcat.mujoco_model`` animations and replays)."""
 
 
 def arm_pair_state(env: Any) -> np.ndarray:

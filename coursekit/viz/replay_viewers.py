@@ -21,7 +21,7 @@ import numpy as np
 from coursekit.tasks.record import Task
 
 if TYPE_CHECKING:
-    from coursekit.viz.meshcat_scene import MeshcatScene
+    from coursekit.viz.meshcat.scene import MeshcatScene
 
 
 class PushTViewer:
@@ -39,7 +39,7 @@ class PushTViewer:
 
     def animate(self, scene: MeshcatScene, states: np.ndarray, fps: float) -> None:
         """Key every state (F, S) into ``scene``'s animation at ``fps``."""
-        from coursekit.viz.meshcat_pusht import PushTMeshcat
+        from coursekit.viz.meshcat.pusht import PushTMeshcat
 
         PushTMeshcat(scene, show_target=False).animate(states[:, :5], fps=fps, play=True)
 
@@ -75,7 +75,7 @@ class MujocoViewer:
 
     def animate(self, scene: MeshcatScene, states: np.ndarray, fps: float) -> None:
         """Key every qpos (F, nq) into ``scene``'s animation at ``fps``."""
-        from coursekit.viz.mujoco_meshcat import MujocoMeshcat
+        from coursekit.viz.meshcat.mujoco_model import MujocoMeshcat
 
         MujocoMeshcat(self.model, scene).animate_qpos(states, fps=fps, play=True)
 
