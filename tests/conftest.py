@@ -41,7 +41,7 @@ def chromium(request):
 
 
 TINY = {"diffusion": ["--down-dims", "16,32"], "regression": ["--down-dims", "16,32"], "flow": ["--down-dims", "16,32"],
-        "act": ["--chunk-size", "10"]}
+        "act": ["--chunk-size", "8"]}  # at most the reach task's shortest demonstration (9 steps)
 """`coursekit train` flags that make each policy type tiny (a type without an entry trains at its default size)."""
 SAMPLES = {"diffusion": ["--steps", "2"], "flow": ["--steps", "2"]}
 """`coursekit eval` flags of the policy types that sample: two denoising / integration steps."""

@@ -102,7 +102,7 @@ CASES = [
     ("export lerobot {A}/demos.npz {A}/results --overwrite", "is not a coursekit LeRobot export"),
     ("export lerobot {A}/demos.npz {A}/notes.txt", "OUT_DIR '{A}/notes.txt' exists and is a file"),
     ("export lerobot {A}/demos.npz {A}/good", "OUT_DIR '{A}/good' already holds a coursekit LeRobot export; pass --overwrite"),
-    ("export lerobot {A}/demos.npz {A}/demos.npz/out", "is the input '{A}/demos.npz' or inside it"),
+    ("export lerobot {A}/demos.npz {A}/demos.npz/out", "is inside the input '{A}/demos.npz'"),
     ("export lerobot {A}/demos.npz {A}", "OUT_DIR '{A}' contains the input '{A}/demos.npz'"),
     ("export lerobot {A}/missing.npz {A}/out", "dataset file not found: '{A}/missing.npz'"),
     ("export lerobot {A}/notes.txt {A}/out", "'{A}/notes.txt' is not a coursekit dataset"),
@@ -118,7 +118,7 @@ CASES = [
     # import: output path, then the folder: not v3, missing features, lengths, NaN actions, rate, task
     ("import lerobot {A}/good {A}/notes.txt", "OUT '{A}/notes.txt' exists and is not a coursekit dataset"),
     ("import lerobot {A}/good {A}/demos.npz", "OUT '{A}/demos.npz' already holds a coursekit dataset; pass --overwrite"),
-    ("import lerobot {A}/good {A}/good/back.npz", "is the input '{A}/good' or inside it"),
+    ("import lerobot {A}/good {A}/good/back.npz", "is inside the input '{A}/good'"),
     ("import lerobot {A}/good {A}/results", "OUT '{A}/results' is a directory"),
     ("import lerobot {A}/results {A}/out.npz", "'{A}/results' is not a LeRobotDataset folder: it has no meta/info.json"),
     ("import lerobot {A}/missing {A}/out.npz", "'{A}/missing' is not a folder"),

@@ -53,7 +53,7 @@ def test_grade_cli_rejects_bad_input(tmp_path, capsys):
     assert main(["grade", str(tmp_path), "--out", str(tmp_path / "out"), "--jobs", "0"]) == 2
     assert "argument --jobs: must be an integer in [1, 256], got '0'" in capsys.readouterr().err
     assert main(["grade", str(tmp_path), "--out", str(tmp_path / "out"), "--timeout", "-1"]) == 2
-    assert "argument --timeout: must be a finite number > 0, got '-1'" in capsys.readouterr().err
+    assert "argument --timeout: must be a finite number in (0, 3600], got '-1'" in capsys.readouterr().err
     (tmp_path / "subs").mkdir()  # --out must be outside the submissions folder (coursekit.outputs)
     assert main(["grade", str(tmp_path / "subs"), "--out", str(tmp_path / "out"), "--exercise", "nope"]) == 2
     assert "unknown exercise 'nope'" in capsys.readouterr().err

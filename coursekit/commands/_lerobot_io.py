@@ -30,7 +30,10 @@ def require_pyarrow() -> None:
 def _export_foreign(path: Path) -> str | None:
     from coursekit.data.lerobot_export import is_lerobot_export
 
-    return None if is_lerobot_export(path) else "it has no meta/info.json and meta/coursekit.json of an export"
+    if is_lerobot_export(path):
+        return None
+    names = sorted(p.name for p in path.iterdir())
+    return f"it holds {', '.join(names[:3])}{', ...' if len(names) > 3 else ''}"
 
 
 def _dataset_foreign(path: Path) -> str | None:

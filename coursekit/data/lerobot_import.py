@@ -34,6 +34,7 @@ from coursekit.data.episodes import EpisodeDataset
 from coursekit.data.lerobot_export import SIDECAR, SIDECAR_VERSION
 from coursekit.data.lerobot_reader import LeRobotFolder, read_folder
 from coursekit.data.lerobot_tasks import TASKS, LeRobotTask, get_task
+from coursekit.tasks.aloha import INSERTION, TRANSFER_CUBE
 
 MAPPED = ("observation.state", "observation.environment_state")
 """LeRobot observation features with a coursekit counterpart (besides action and one camera)."""
@@ -58,7 +59,7 @@ def _infer_task(folder: LeRobotFolder, as_task: str | None) -> LeRobotTask:
     if action.shape == (2,):
         return TASKS["pusht"]
     env = folder.features.get("observation.environment_state")
-    by_objects = {7: "transfer_cube", 14: "insertion"}
+    by_objects = {7: TRANSFER_CUBE.name, 14: INSERTION.name}
     if action.shape == (14,) and env is not None and env.shape[0] in by_objects:
         return TASKS[by_objects[env.shape[0]]]
     if action.shape == (14,):

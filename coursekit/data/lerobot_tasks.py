@@ -12,6 +12,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from coursekit.tasks.aloha import INSERTION, TRANSFER_CUBE
 from coursekit.tasks.registry import get_task as task_record
 
 
@@ -44,9 +45,9 @@ class LeRobotTask:
 TASKS: dict[str, LeRobotTask] = {
     "pusht": LeRobotTask("pusht", "Push the T-shaped block onto the T-shaped target.",
                          None, "observation.image", 2),
-    "transfer_cube": LeRobotTask("transfer_cube", "Pick up the cube with the right arm and transfer it to the left arm.",
+    TRANSFER_CUBE.name: LeRobotTask(TRANSFER_CUBE.name, "Pick up the cube with the right arm and transfer it to the left arm.",
                                  "aloha", "observation.images.top", 14),
-    "insertion": LeRobotTask("insertion", "Pick up the socket and the peg with one arm each and insert the peg into the socket.",
+    INSERTION.name: LeRobotTask(INSERTION.name, "Pick up the socket and the peg with one arm each and insert the peg into the socket.",
                              "aloha", "observation.images.top", 14),
 }
 """coursekit task name -> :class:`LeRobotTask`."""
@@ -68,8 +69,8 @@ def task_of_dataset(arrays: Mapping[str, Any], meta: Mapping[str, Any]) -> LeRob
     by_env = {t.env_id: t.name for t in TASKS.values()}
     name = meta.get("task") or by_env.get(meta.get("env_id"))
     if name is None and "env_state" in arrays:
-        name = {7: "transfer_cube", 14: "insertion"}.get(arrays["env_state"].shape[-1])
-    if name not in ("transfer_cube", "insertion"):
+        name = {7: TRANSFER_CUBE.name, 14: INSERTION.name}.get(arrays["env_state"].shape[-1])
+    if name not in (TRANSFER_CUBE.name, INSERTION.name):
         raise ValueError(f"cannot tell which arm-pair task these demonstrations are (meta task {meta.get('task')!r}, "
                          f"env_id {meta.get('env_id')!r})")
     return TASKS[name]
