@@ -123,6 +123,15 @@ class Sandbox:
             raise StudentCodeError("timeout", "", f"the tests of this exercise took longer than {self.budget:g} s in "
                                    "all and were stopped (an endless loop?)")
 
+    def prestart(self) -> None:
+        """Start the worker now (e.g. in a thread while the tests import torch), so that the first
+        request finds it ready; a failure is left to that request, which starts it again or raises."""
+        try:
+            if self.proc is None:
+                self._start()
+        except StudentCodeError:
+            pass
+
     def _start(self) -> None:
         if self.sticky is not None:
             raise self.sticky
