@@ -25,6 +25,7 @@ import shutil
 import sys
 import tempfile
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -63,15 +64,24 @@ class EarlyWorker:
     def __init__(self, config, exercise_id: str) -> None:
         # not under --basetemp: pytest empties that folder when it first uses it
         self.scratch = tempfile.mkdtemp(prefix="coursekit-worker-")
-        self.box: Sandbox | None = None
         self.started, self.closing = threading.Event(), threading.Event()
-        self.thread = threading.Thread(target=self._run, args=(config, exercise_id), daemon=True)
-        self.thread.start()
-
-    def _run(self, config, exercise_id: str) -> None:
         try:
-            self.box = new_sandbox(config, exercise_id, self.scratch)
-            self.box.prestart()
+            self.box: Sandbox | None = new_sandbox(config, exercise_id, self.scratch)
+        except Exception:  # noqa: BLE001 - the fixture builds it again and reports the error there
+            self.box = None
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+        # Wait (sleeping) until the worker process exists: this thread goes on to import the test
+        # modules, and torch's import holds the GIL for long stretches that would delay the launch.
+        deadline = time.monotonic() + 5.0
+        while self.box is not None and self.box.proc is None and not self.started.is_set() \
+                and time.monotonic() < deadline:
+            time.sleep(0.005)
+
+    def _run(self) -> None:
+        try:
+            if self.box is not None:
+                self.box.prestart()
         finally:
             self.started.set()
         self.closing.wait()
