@@ -137,7 +137,7 @@ def test_delay_scrubber_follows_the_delayed_executors():
 
 
 HEADLESS_CELLS = {
-    "scrubber": ("import ipywidgets as widgets\nfrom coursekit.viz.widgets import FigureScrubber\n"
+    "scrubber": ("import ipywidgets as widgets\nfrom coursekit.viz import FigureScrubber\n"
                  "s = FigureScrubber(lambda fig, a: fig.add_subplot().plot([0, a]), {'a': widgets.IntSlider(value=1)})\n"
                  "s.controls['a'].value = 3\ns"),
     # the pattern chapter 4 used before: an Output that captures display(fig)

@@ -3,22 +3,11 @@
 :class:`FigureScrubber` is the one mechanism: ipywidgets controls and an ``ipywidgets.Image``
 holding a PNG of a matplotlib ``Figure``; moving a control redraws the figure and replaces the
 image's bytes, so the picture changes where it is (no output area is cleared and re-filled).
-
-Why not an ``ipywidgets.Output``: headless runs stall on it. An Output that captures
-``display(fig)`` makes nbclient's Output-widget mimic (``nbclient/output_widget.py``,
-``OutputWidget.sync_state``) send a ``comm_msg`` back to the kernel on the shell channel. That send
-goes through jupyter_client's ``Session.send`` on a blocking shadow of the client's asyncio socket
-and consumes the socket's edge-triggered wake-up; when the cell's ``execute_reply`` has already
-arrived (a busy machine), the client then sleeps out its whole cell timeout. Here the kernel only
-ever sets the image's bytes, so the client never writes back.
-
 The builders below are the course's scrubbers:
 
     ensemble_scrubber   chapter 8: the ensembling weight m on a recorded chunk stream
     cvae_scrubber       chapter 7: beta and the latent z of the CVAE, decoded chunk in place
     chunk_replay        chapter 5: Ta / Tp on a recorded rollout (``coursekit.viz.widgets_chunks``)
-    delay_scrubber      chapter 11: the delay d (``coursekit.viz.widgets_delay``)
-(chapter 4 builds its denoising scrubber from :class:`FigureScrubber` in the notebook.)
 
 Widgets need a live kernel; in a static render the first picture shows.
 """
