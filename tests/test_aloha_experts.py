@@ -4,6 +4,10 @@ and the waypoint tools behave (interpolation, quaternions)."""
 from __future__ import annotations
 
 import importlib.util
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,6 +24,7 @@ from coursekit.experts.aloha_scripted import (  # noqa: E402
     collect,
     collect_transfer_cube,
     scripted_episode,
+    worker_context,
 )
 from coursekit.experts.aloha_waypoints import Waypoint, interpolate, quat_axis_angle, quat_mul, quat_slerp  # noqa: E402
 
@@ -95,3 +100,17 @@ def test_collect_round_trip_deterministic_and_chunkable(tmp_path):
     # same seed, same data, whether collected by worker processes or in this one
     again = collect("transfer_cube", 1, seed=5, progress=False, workers=1)
     np.testing.assert_array_equal(again["action"], data.episode(0)["action"])
+
+
+def test_collect_workers_never_fork_the_caller(tmp_path):
+    """The caller may be a Jupyter kernel, whose ZMQ threads make fork unsafe (issue 22): workers
+    start from a forkserver, so they import the caller's main module, and an unguarded script that
+    asks for workers gets one clear line (a forked worker would have run it without a word)."""
+    assert worker_context().get_start_method() in ("forkserver", "spawn")
+    script = tmp_path / "unguarded.py"
+    script.write_text("from coursekit.experts.aloha_scripted import collect\n"
+                      "collect('transfer_cube', 1, seed=5, progress=False, workers=2)\n")
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parent.parent)}
+    proc = subprocess.run([sys.executable, str(script)], env=env, capture_output=True, text=True, timeout=300)
+    assert proc.returncode != 0, proc.stdout
+    assert 'its top level must be guarded by `if __name__ == "__main__":`; or pass workers=1' in proc.stderr, proc.stderr[-2000:]

@@ -127,7 +127,7 @@ def test_chapter0_runs_and_its_meshcat_views_draw(page, lab):
 
 def test_chapter4_runs_and_the_denoising_scrubber_moves_its_figure(page, lab):
     run_notebook(page, lab, "04_samplers.ipynb")
-    scrub_changes_figure(page, ".widget-slider", "img")
+    scrub_changes_figure(page, ".ck-scrubber", ".ck-scrub-figure")
 
 
 def test_chapter5_runs_the_ta_scrubber_moves_and_meshcat_draws(page, lab):

@@ -84,6 +84,24 @@ def _meshcat_servers(run_id: str) -> set[int]:
     return pids
 
 
+CAPTURES = r"\bOutput\(|\binteract(ive|_manual)?\b|\.capture\("
+"""ipywidgets that capture displays into an Output widget (``interact`` does too)."""
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=_ids(NOTEBOOKS))
+def test_no_widget_captures_displays(path):
+    """A display captured by an ipywidgets.Output makes nbclient write back to the kernel, which can
+    stall a headless run for its whole cell timeout (issue 22, chapter 4; the mechanism is
+    test_widget_figures_never_make_a_headless_client_write_back): widget figures are
+    ``coursekit.viz.FigureScrubber`` images."""
+    import re
+
+    nb = json.loads(path.read_text())
+    found = [(i, m.group(0)) for i, c in enumerate(nb["cells"]) if c["cell_type"] == "code"
+             for m in re.finditer(CAPTURES, "".join(c["source"]))]
+    assert not found, f"{path.name}: cells capture displays into an Output widget: {found}"
+
+
 def run_notebook(path: Path, monkeypatch, mode: str, fast: bool = True, env: dict[str, str] | None = None,
                  extra_cells: tuple[str, ...] = ()):
     """Execute ``path`` (plus ``extra_cells`` at the end) in a fresh "coursekit" kernel; returns the executed notebook."""

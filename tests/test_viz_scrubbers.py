@@ -135,3 +135,59 @@ def test_delay_scrubber_follows_the_delayed_executors():
     assert s.redraws == 2 and bytes(s.image.value) != first
     with pytest.raises(ValueError, match="strategy"):
         play_delay("rtc", 1)
+
+
+HEADLESS_CELLS = {
+    "scrubber": ("import ipywidgets as widgets\nfrom coursekit.viz import FigureScrubber\n"
+                 "s = FigureScrubber(lambda fig, a: fig.add_subplot().plot([0, a]), {'a': widgets.IntSlider(value=1)})\n"
+                 "s.controls['a'].value = 3\ns"),
+    # the pattern chapter 4 used before: an Output that captures display(fig)
+    "output capture": ("import ipywidgets as widgets\nfrom IPython.display import display\nfrom matplotlib.figure import Figure\n"
+                       "out = widgets.Output()\nfig = Figure()\nfig.add_subplot().plot([0, 1])\n"
+                       "with out:\n    out.clear_output(wait=True)\n    display(fig)\nout"),
+}
+
+
+@pytest.mark.notebook
+def test_widget_figures_never_make_a_headless_client_write_back():
+    """Chapter 4's stall (issue 22). nbclient answers a display captured by an ``ipywidgets.Output``
+    with a ``comm_msg`` on the shell channel (its Output-widget mimic syncing the outputs back), sent
+    through jupyter_client's ``Session.send`` on a blocking shadow of the asyncio socket. That send
+    consumes the socket's edge-triggered wake-up: if the cell's ``execute_reply`` is already queued
+    (a busy machine: the kernel finishes before the client has handled the display), the client's
+    pending poll is never woken and it waits out its whole cell timeout. The course's widget figures
+    (``FigureScrubber``) only set image bytes from the kernel: the client never writes back. The
+    Output cell shows that this instrument sees the write-back when it happens."""
+    import nbformat
+    from nbclient import NotebookClient
+
+    sent: dict[str, list[str]] = {}
+
+    class Recording(NotebookClient):
+        async def async_start_new_kernel_client(self):
+            kc = await super().async_start_new_kernel_client()
+            send = kc.shell_channel.send
+
+            def recording_send(msg):
+                sent.setdefault(self.current, []).append(msg["msg_type"])
+                return send(msg)
+
+            kc.shell_channel.send = recording_send
+            return kc
+
+        async def async_execute_cell(self, cell, cell_index, *args, **kwargs):
+            self.current = cell.metadata["name"]
+            return await super().async_execute_cell(cell, cell_index, *args, **kwargs)
+
+    cells = [nbformat.v4.new_code_cell(src, metadata={"name": name}) for name, src in HEADLESS_CELLS.items()]
+    nb = nbformat.v4.new_notebook(cells=cells)
+    # The Output cell can hit the very stall (the client then wakes at its timeout and goes on, no
+    # error): a short timeout bounds that cost; the cell itself takes well under a second.
+    client = Recording(nb, kernel_name="coursekit",
+                       timeout_func=lambda cell: 60 if cell.metadata["name"] == "output capture" else 600)
+    client.current = "start"
+    client.execute()
+    errors = [o for c in nb.cells for o in c.outputs if o.output_type == "error"]
+    assert not errors, [e.evalue for e in errors]
+    assert sent["scrubber"] == ["execute_request"], f"the scrubber cell made the client send {sent['scrubber']}"
+    assert "comm_msg" in sent["output capture"], sent["output capture"]

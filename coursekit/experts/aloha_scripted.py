@@ -31,6 +31,7 @@ from __future__ import annotations
 import multiprocessing
 import os
 from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -268,6 +269,31 @@ def _run_seeds(task: str, seeds: list[int], cfg: ScriptConfig) -> list[tuple[int
     return out
 
 
+def worker_context() -> multiprocessing.context.BaseContext:
+    """The start method of collect()'s worker processes: forkserver, or spawn where there is none.
+
+    Never fork: the caller may be a Jupyter kernel, whose ZMQ and IOPub threads hold locks that a
+    fork copies in whatever state they are in (POSIX: only async-signal-safe calls are allowed in
+    the child of a multi-threaded process; CPython 3.12 warns, 3.14 makes forkserver the default).
+    Like spawn, forkserver imports the caller's main module in each worker, so a script that calls
+    collect() with more than one worker needs an ``if __name__ == "__main__":`` guard.
+    """
+    methods = multiprocessing.get_all_start_methods()
+    return multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
+
+
+def _map_workers(pool: ProcessPoolExecutor | None, args: tuple[list, ...]):
+    """``_run_seeds`` over ``args`` in the pool (or here); a worker dead at start gets one clear line."""
+    if pool is None:
+        yield from map(_run_seeds, *args)
+        return
+    try:
+        yield from pool.map(_run_seeds, *args)
+    except BrokenProcessPool as exc:
+        raise RuntimeError("a worker process of collect() died (run from a script? its top level must be "
+                           "guarded by `if __name__ == \"__main__\":`; or pass workers=1)") from exc
+
+
 def collect(task: str, n_episodes: int, seed: int = 0, progress: bool = True, cfg: ScriptConfig = ScriptConfig(),
             max_attempts: int | None = None, workers: int | None = None) -> EpisodeDataset:
     """``n_episodes`` strictly successful scripted demonstrations of ``task`` as a dataset.
@@ -286,11 +312,7 @@ def collect(task: str, n_episodes: int, seed: int = 0, progress: bool = True, cf
     kept, kept_seeds, failed_seeds, lenient = [], [], [], 0
     bar = tqdm(total=n_episodes, desc=f"aloha {task} demos", disable=not progress, unit="ep")
     next_seed, last_seed = seed, seed + max_attempts
-    # Fork (where the OS has it): the workers only step MuJoCo (no GL, no torch), and unlike spawn
-    # it does not re-run the caller's script, so collect() works from an unguarded script too.
-    if "fork" not in multiprocessing.get_all_start_methods():
-        workers = 1
-    pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")) if workers > 1 else None
+    pool = ProcessPoolExecutor(workers, mp_context=worker_context()) if workers > 1 else None
     try:
         while len(kept) < n_episodes:
             # Exactly as many attempts as demonstrations are missing: the kept seeds are then the
@@ -303,7 +325,7 @@ def collect(task: str, n_episodes: int, seed: int = 0, progress: bool = True, cf
             size = max(1, -(-len(batch) // (4 * workers)))  # ceil: about 4 chunks per worker, for the progress bar
             chunks = [batch[i: i + size] for i in range(0, len(batch), size)]
             args = ([task] * len(chunks), chunks, [cfg] * len(chunks))
-            for results in (pool.map(_run_seeds, *args) if pool else map(_run_seeds, *args)):
+            for results in _map_workers(pool, args):
                 for s, episode in results:
                     lenient += int(episode.pop("lenient_success"))
                     if bool(episode.pop("strict_success")):

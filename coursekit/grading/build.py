@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import ast
 import builtins
+import importlib.machinery
 import importlib.util
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,7 +38,15 @@ class _Source:
 
 
 def _read_source(module: str) -> _Source:
-    spec = importlib.util.find_spec(module)
+    # Located, not imported: find_spec("coursekit.nn.kl") would run coursekit/nn/__init__.py (torch),
+    # and a grading worker's start (coursekit.grading.remote) reads its exercise's source this way.
+    spec = importlib.util.find_spec(module.split(".")[0])
+    for depth in range(2, module.count(".") + 2):
+        if spec is None or not spec.submodule_search_locations:
+            spec = None
+            break
+        spec = importlib.machinery.PathFinder.find_spec(".".join(module.split(".")[:depth]),
+                                                        list(spec.submodule_search_locations))
     if spec is None or not spec.origin or not spec.origin.endswith(".py"):
         raise ValueError(f"exercise source module {module!r} is not an importable .py file")
     path = Path(spec.origin)

@@ -150,7 +150,11 @@ def main() -> int:
         channel.send(event="crash", message=f"{type(exc).__name__}: {exc}")
         return 3
     channel.send(event="done", exit_code=int(code))
-    return 0
+    # Everything is reported and every worker closed: skip the interpreter's teardown, which with
+    # torch loaded takes longer than many an exercise's tests (coursekit check answers sooner).
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(0)
 
 
 if __name__ == "__main__":

@@ -49,7 +49,10 @@ def _np():
 def _torch_if_loaded():
     import sys
 
-    return sys.modules.get("torch")
+    torch = sys.modules.get("torch")
+    # Another thread may be importing torch right now (a worker started early: tests/exercises/conftest.py);
+    # until torch.Tensor and torch.Generator exist, no value can be either.
+    return torch if hasattr(torch, "Tensor") and hasattr(torch, "Generator") else None
 
 
 def encode(value: Any, obj_ref: Callable[[Any], dict] | None = None, cb_ref: Callable[[Any], dict] | None = None,

@@ -75,6 +75,7 @@ class Sandbox:
         self.causes: list[str] = []
         self.reference = ""
         self.over_output = None
+        self.next_poll = 0.0
         self.reap = reap
         if reap:
             become_subreaper()
@@ -122,6 +123,15 @@ class Sandbox:
         if time.monotonic() >= self.budget_end:
             raise StudentCodeError("timeout", "", f"the tests of this exercise took longer than {self.budget:g} s in "
                                    "all and were stopped (an endless loop?)")
+
+    def prestart(self) -> None:
+        """Start the worker now (e.g. in a thread while the tests import torch), so that the first
+        request finds it ready; a failure is left to that request, which starts it again or raises."""
+        try:
+            if self.proc is None:
+                self._start()
+        except StudentCodeError:
+            pass
 
     def _start(self) -> None:
         if self.sticky is not None:
@@ -282,7 +292,7 @@ class Sandbox:
             raise StudentCodeError("protocol", "", f"the worker sent a malformed reply: {exc}") from None
 
     def _read(self, n: int, deadline: float, during: str) -> bytes:
-        parts, got, next_poll = [], 0, 0.0
+        parts, got = [], 0
         while got < n:
             now = time.monotonic()
             if now >= deadline:
@@ -291,8 +301,8 @@ class Sandbox:
                     self._raise_if_spent()
                 raise StudentCodeError("timeout", "", f"Timeout (>{self.test_timeout:g}s) while {during}: your code "
                                        "did not return in time (an endless loop?)")
-            if now >= next_poll:
-                next_poll = now + 0.5
+            if now >= self.next_poll:  # at most every 0.5 s, not per message: psutil scans all of /proc
+                self.next_poll = now + 0.5
                 rss_mb, n_procs = tree_usage(self.proc.pid) if self.proc is not None else (0.0, 0)
                 if rss_mb > 1.5 * self.memory_mb:
                     self.kill()

@@ -21,6 +21,12 @@ tests/test_grading_exercises.py, and students use ``coursekit.check("<id>")``.
 from __future__ import annotations
 
 import os
+import shutil
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
 
 import pytest
 
@@ -30,22 +36,114 @@ from coursekit.grading.remote import RemoteModule, Sandbox
 if not os.environ.get("COURSEKIT_EXERCISES"):
     collect_ignore_glob = ["test_*.py"]
 
+EARLY = pytest.StashKey[dict]()
+"""config.stash key: test module path -> its :class:`EarlyWorker`, started at session start."""
+
+
+def new_sandbox(config, exercise_id: str, scratch) -> Sandbox:
+    """The worker of one exercise, with the grading run's limits (defaults outside the grader)."""
+    settings = grading_settings(config) or {}
+    from coursekit.grading.paths import exercise_dir, repo_root
+
+    folder = settings.get("submission") or str(exercise_dir())
+    return Sandbox(exercise_id, folder, scratch,
+                   test_timeout=float(settings.get("test_timeout", 60)), budget=float(settings.get("budget", 600)),
+                   memory_mb=int(settings.get("memory_mb", 2048)), output_mb=int(settings.get("file_mb", 32)),
+                   disk_mb=int(settings.get("disk_mb", 64)), mode=settings.get("mode"),
+                   solutions_dir=settings.get("solutions_dir") or str(repo_root() / "solutions"),
+                   tag=settings.get("tag", ""), reap=bool(settings))
+
+
+class EarlyWorker:
+    """A test module's worker started in a thread at session start, so that its start-up (importing
+    torch) runs while this process imports the test modules (torch again) instead of after them: on
+    two cores, most of the wait of ``coursekit.check``. The thread stays alive until :meth:`close`:
+    the worker dies with the thread that started it (bwrap --die-with-parent is PR_SET_PDEATHSIG,
+    which fires when that thread ends)."""
+
+    def __init__(self, config, exercise_id: str) -> None:
+        # not under --basetemp: pytest empties that folder when it first uses it
+        self.scratch = tempfile.mkdtemp(prefix="coursekit-worker-")
+        self.started, self.closing = threading.Event(), threading.Event()
+        try:
+            self.box: Sandbox | None = new_sandbox(config, exercise_id, self.scratch)
+        except Exception:  # noqa: BLE001 - the fixture builds it again and reports the error there
+            self.box = None
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+        # Wait (sleeping) until the worker process exists: this thread goes on to import the test
+        # modules, and torch's import holds the GIL for long stretches that would delay the launch.
+        deadline = time.monotonic() + 5.0
+        while self.box is not None and self.box.proc is None and not self.started.is_set() \
+                and time.monotonic() < deadline:
+            time.sleep(0.005)
+
+    def _run(self) -> None:
+        try:
+            if self.box is not None:
+                self.box.prestart()
+        finally:
+            self.started.set()
+        self.closing.wait()
+
+    def take(self) -> Sandbox | None:
+        """The started sandbox (None if building it failed: the caller builds one itself)."""
+        self.started.wait()
+        return self.box
+
+    def close(self) -> None:
+        self.started.wait()
+        if self.box is not None:
+            self.box.close()
+        self.closing.set()
+        self.thread.join()
+        shutil.rmtree(self.scratch, ignore_errors=True)
+
+
+def pytest_sessionstart(session):
+    """Start the worker of the first graded module named on the command line (see :class:`EarlyWorker`).
+    Only the first: pytest imports every module before the first test, so only that worker's start-up
+    can overlap the imports; the others start when their module runs, after the previous worker has
+    gone (a closing sandbox also ends every other process the grader left, ``kill_orphans``)."""
+    from coursekit.grading import EXERCISES
+
+    if not os.environ.get("COURSEKIT_EXERCISES"):
+        return
+    ids = {e.id for e in EXERCISES}
+    for arg in session.config.args:
+        path = Path(arg).resolve()
+        exercise = path.stem.removeprefix("test_")
+        if path.parent == Path(__file__).resolve().parent and path.suffix == ".py" and exercise in ids:
+            session.config.stash[EARLY] = {str(path): EarlyWorker(session.config, exercise)}
+            return
+
+
+def pytest_sessionfinish(session):
+    """Workers started early for modules that never ran (deselected, failed to import) stop here."""
+    for worker in session.config.stash.get(EARLY, {}).values():
+        worker.close()
+
 
 @pytest.fixture(scope="module")
 def sandbox(request, tmp_path_factory):
     """The worker for this module's exercise (restarted by itself after a crash or a timeout)."""
-    settings = grading_settings(request.config) or {}
-    from coursekit.grading.paths import exercise_dir, repo_root
-
-    folder = settings.get("submission") or str(exercise_dir())
-    box = Sandbox(request.module.EXERCISE, folder, tmp_path_factory.mktemp("worker"),
-                  test_timeout=float(settings.get("test_timeout", 60)), budget=float(settings.get("budget", 600)),
-                  memory_mb=int(settings.get("memory_mb", 2048)), output_mb=int(settings.get("file_mb", 32)),
-                  disk_mb=int(settings.get("disk_mb", 64)), mode=settings.get("mode"),
-                  solutions_dir=settings.get("solutions_dir") or str(repo_root() / "solutions"),
-                  tag=settings.get("tag", ""), reap=bool(settings))
+    early = request.config.stash.get(EARLY, {}).pop(str(Path(request.module.__file__).resolve()), None)
+    if early is not None and "torch" in sys.modules:
+        # while the worker is still starting: torch.testing.assert_close's first call imports
+        # torch.distributed.tensor (sympy; most of a second), which would otherwise delay the first test
+        torch = sys.modules["torch"]
+        torch.testing.assert_close(torch.zeros(1), torch.zeros(1))
+    box = early.take() if early is not None else None
+    if box is None or box.exercise.id != request.module.EXERCISE:
+        if early is not None:
+            early.close()
+        early = None
+        box = new_sandbox(request.config, request.module.EXERCISE, tmp_path_factory.mktemp("worker"))
     yield box
-    box.close()
+    if early is not None:
+        early.close()
+    else:
+        box.close()
 
 
 @pytest.fixture(scope="module")

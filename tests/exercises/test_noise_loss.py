@@ -1,7 +1,8 @@
 """Exercise 2.1 (noise_loss): forward noising q_sample and the epsilon-prediction loss.
 
 References: the closed form x_t = sqrt(abar_t) x0 + sqrt(1 - abar_t) eps written here, diffusers'
-DDPMScheduler.add_noise, and torch's F.mse_loss. The epsilon_loss tests pass the REFERENCE
+DDPMScheduler.add_noise (golden values: ``golden_values()``, stored below by tests/exercises/golden.py),
+and torch's F.mse_loss. The epsilon_loss tests pass the REFERENCE
 q_sample (``reference_q_sample``) as ``q_sample_fn``, so a wrong q_sample fails only its own tests.
 """
 
@@ -58,12 +59,21 @@ def test_q_sample_endpoints_and_other_shapes(student):
     assert torch.isfinite(got).all()
 
 
-def test_q_sample_matches_diffusers_add_noise(student):
-    diffusers = pytest.importorskip("diffusers")
+def golden_values() -> dict[str, dict[str, list]]:
+    """diffusers' DDPMScheduler.add_noise on ``_inputs(4, shape=(6, 8, 3))`` (flattened). Needs
+    diffusers; the test reads the stored copy (GOLDEN), written by tests/exercises/golden.py."""
+    import diffusers
+
     ref = diffusers.DDPMScheduler(num_train_timesteps=100, beta_schedule="squaredcos_cap_v2")
     x0, noise, t = _inputs(4, shape=(6, 8, 3))
+    return {"add_noise": {"t": t.tolist(), "x_t": ref.add_noise(x0, noise, t).flatten().tolist()}}
+
+
+def test_q_sample_matches_diffusers_add_noise(student):
+    x0, noise, t = _inputs(4, shape=(6, 8, 3))
+    assert t.tolist() == GOLDEN["add_noise"]["t"]
     got = student.q_sample(x0, t, noise, ABAR.clone())
-    torch.testing.assert_close(got, ref.add_noise(x0, noise, t), rtol=1e-5, atol=1e-5)
+    torch.testing.assert_close(got, torch.tensor(GOLDEN["add_noise"]["x_t"]).reshape(6, 8, 3), rtol=1e-5, atol=1e-5)
 
 
 def test_epsilon_loss_is_mse_on_noise(student):
@@ -100,3 +110,40 @@ def test_epsilon_loss_uses_q_sample_fn_and_backpropagates(student, sandbox):
     assert grads["w"] is not None, "no gradient reached the model's parameter: keep the loss a torch expression"
     torch.testing.assert_close(grads["w"], (2 * (0.6 - noise) * 2.0).mean(), rtol=1e-4, atol=1e-6,
                                msg=lambda m: f"d loss / d w (the model's parameter) differs: {m}")
+
+
+# BEGIN GOLDEN: written by `python tests/exercises/golden.py` from golden_values(); do not edit
+GOLDEN = {
+    'add_noise': {
+        't': [
+            97, 82, 92, 14, 60, 77,
+        ],
+        'x_t': [
+            1.55016053, -1.52995992, -0.58981812, -0.294454306, 1.18184781, 1.10672808,
+            -0.711222291, -1.47909296, 0.756764829, -0.160783768, 1.04514539, 1.03681159,
+            0.844952047, -0.905075729, -0.214998439, -0.311859667, -0.547851682, 0.812977433,
+            0.477259606, 0.145346284, 0.310814142, -0.700599492, -1.32348394, -2.13122392,
+            1.07949471, 0.0601085238, 0.0984842181, -1.2044822, -0.125022128, 0.320653379,
+            1.18966186, -0.465472013, -0.720596492, -0.841773629, -0.219822407, -2.16979623,
+            -0.832083464, 0.660369635, -0.0815054774, -0.0419204235, 1.27814627, 0.773133576,
+            -0.317425072, 1.00543141, -1.49719083, 1.16837263, 0.381690651, -0.852876186,
+            0.834593356, 0.483261317, -1.11936009, 0.618730307, -0.0905012339, -1.48011112,
+            1.69489634, -0.0417492948, -2.87268972, 0.227141142, -0.680729747, -1.52395391,
+            0.992099643, 0.0259658694, 0.122912742, 0.0861881077, -0.0594143197, -0.975950956,
+            -1.32540607, 1.00924635, 0.787764966, 2.17696333, 1.30187511, -1.0221808,
+            -0.914303899, -0.142773837, -0.445309162, 0.77832824, 0.482751548, 0.411861748,
+            -0.134477675, -0.499280661, -0.0589043796, 1.02942562, 0.123877734, -0.861912489,
+            -0.34716785, 0.44091323, 0.540168345, 0.644538224, -0.899171233, -1.03515255,
+            0.0262520313, 0.467344254, 0.576636493, 0.876345754, 1.07993293, -0.407808244,
+            -0.288817406, -0.794648051, 0.489814341, -1.57864547, 0.827461123, -0.732392073,
+            0.908879757, 0.723952889, 0.0893924832, -0.695590734, 0.167829812, -0.598694086,
+            0.62043184, 0.911751628, 0.498621434, 0.420778304, 0.77010864, -0.837665915,
+            0.0651647672, -0.307841361, 1.47016311, 0.267014444, -0.858671069, -2.57407594,
+            -0.0843128562, 0.52615869, -0.72986871, 0.0725736767, 1.64779556, -1.16089439,
+            0.496704698, 1.23778749, -0.821242034, 1.52109087, 0.841275156, -0.613258719,
+            -0.790224493, 1.14991558, 1.6552738, -1.84735131, 1.32191491, -1.54131484,
+            0.660905361, -0.544836462, -1.23353326, 0.402524769, -0.247795433, 2.26536727,
+        ],
+    },
+}
+# END GOLDEN
