@@ -43,10 +43,9 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("give SUBMISSIONS_DIR and --out DIR (or --gradescope-autograder ZIP)")
     summary = grade_submissions(args.submissions, args.out, args.exercise, jobs=args.jobs, limits=limits,
                                 progress=not args.no_progress, hidden_tests=args.hidden_tests)
-    max_total = sum(e.max_points for e in summary.exercises)
     for student in sorted(summary.students, key=lambda s: s.student):
         notes = [f"{g.exercise.id}: {g.status}" for g in student.grades if g.status != "ok"]
-        print(f"{student.student:<24} {student.points:>6g} / {max_total:g}  {'; '.join(notes)}")
+        print(f"{student.student:<24} {student.points:>6g} / {student.max_points:g}  {'; '.join(notes)}")
     for warning in summary.warnings:
         print(f"WARNING: {warning}")
     print(f"graded {len(summary.students)} submissions x {len(summary.exercises)} exercises in "
