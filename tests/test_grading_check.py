@@ -65,7 +65,7 @@ def test_grade_cli_rejects_bad_input(tmp_path, capsys):
 def test_zip_members_are_flattened_and_size_capped(tmp_path):
     import zipfile
 
-    from coursekit.grading.grade import _extract_zip
+    from coursekit.grading.grade import extract_zip
     from coursekit.grading.registry import EXERCISES
     from coursekit.grading.runner import MAX_MODULE_BYTES
 
@@ -77,7 +77,7 @@ def test_zip_members_are_flattened_and_size_capped(tmp_path):
         zf.writestr(f"{EXERCISES[-1].id}.py", "#" * (MAX_MODULE_BYTES + 1))  # too big: not extracted
     dest = tmp_path / "dest"
     dest.mkdir()
-    _extract_zip(archive, dest, list(EXERCISES))
+    assert extract_zip(archive, dest, list(EXERCISES)) == {f"{EXERCISES[-1].id}.py": MAX_MODULE_BYTES + 1}
     assert sorted(p.name for p in dest.iterdir()) == ["chunk_windows.py"]
     assert (dest / "chunk_windows.py").read_text() == "X = 2\n"
     assert not (tmp_path / "outside").exists()

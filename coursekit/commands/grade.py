@@ -60,10 +60,9 @@ def run(args: argparse.Namespace) -> int:
         for leftover in lock.swept:
             print(f"removed {str(leftover)!r}, left by an interrupted earlier run")
         summary = _grade_into(args, limits, lock)
-    max_total = sum(e.max_points for e in summary.exercises)
     for student in sorted(summary.students, key=lambda s: s.student):
         notes = [f"{g.exercise.id}: {g.status}" for g in student.grades if g.status != "ok"]
-        print(f"{student.student:<24} {student.points:>6g} / {max_total:g}  {'; '.join(notes)}")
+        print(f"{student.student:<24} {student.points:>6g} / {student.max_points:g}  {'; '.join(notes)}")
     for warning in summary.warnings:
         print(f"WARNING: {warning}")
     print(f"graded {len(summary.students)} submissions x {len(summary.exercises)} exercises in "

@@ -62,10 +62,9 @@ def gradescope_json(student) -> dict:
     notes = [f"{g.exercise.id}: {g.reason}" for g in student.grades if g.reason]
     if student.problem:
         notes.insert(0, student.problem)
-    total = sum(s.max_points for g in student.grades for s in g.scores)
     return {
         "score": student.points,
-        "output": f"coursekit autograder: {student.points:g} / {total:g} points" + "".join(f"\n- {n}" for n in notes),
+        "output": f"coursekit autograder: {student.points:g} / {student.max_points:g} points" + "".join(f"\n- {n}" for n in notes),
         "visibility": "visible",
         "stdout_visibility": "hidden",
         "tests": tests,
@@ -74,13 +73,12 @@ def gradescope_json(student) -> dict:
 
 def feedback_markdown(student) -> str:
     """A readable per-student report."""
-    total = sum(s.max_points for g in student.grades for s in g.scores)
-    lines = [f"# Feedback for {student.student}", "", f"Total: **{student.points:g} / {total:g}**", ""]
+    lines = [f"# Feedback for {student.student}", "", f"Total: **{student.points:g} / {student.max_points:g}**", ""]
     if student.problem:
         lines += [f"Problem with the submission: {student.problem}", ""]
     for g in student.grades:
         e = g.exercise
-        lines += [f"## Exercise {exercise_number(e)} ({e.id}): {e.title} — {g.points:g} / {sum(s.max_points for s in g.scores):g}", ""]
+        lines += [f"## Exercise {exercise_number(e)} ({e.id}): {e.title} — {g.points:g} / {g.max_points:g}", ""]
         if g.reason:
             lines += [f"**Note:** {g.reason}", ""]
         lines += ["| test | points | result |", "|---|---|---|"]

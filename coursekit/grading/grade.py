@@ -2,10 +2,13 @@
 
 Layout of ``SUBMISSIONS_DIR``: one entry per student, either a folder (a copy of the handed-out
 ``exercises/``; the modules may also sit one folder down) or a ``.zip`` of it. The student id is
-the folder name (or the zip's stem) SANITISED: every run of characters other than letters,
-digits, ``.``, ``_`` and ``-`` becomes one ``_``, leading/trailing ``.``/``_`` are dropped (empty:
-"student"), and a clash gets ``_2``, ``_3``, ... in sorted order; the ``folder`` column of
-grades.csv maps each id back to the submission's own name. For every student one trusted test
+the folder name (or the zip's stem) SANITISED: accented letters lose their accents (``émile`` ->
+``emile``, ``ß`` -> ``ss``), other non-ASCII letters and digits become their code point
+(``u5f20``), every run of other characters than ASCII letters, digits, ``.``, ``_`` and ``-``
+becomes one ``_``, leading/trailing ``.``/``_`` are dropped (empty: "student"), and a clash gets
+``_2``, ``_3``, ... in sorted order; the ``folder`` column of grades.csv maps each id back to the
+submission's own name. Entries whose name starts with ``.`` are not graded: the summary's
+warnings name them. For every student one trusted test
 process runs the graded tests (:func:`coursekit.grading.runner.run_tests`), each exercise's
 student code in its own sandboxed worker; the test files are read once at the start.
 
@@ -27,6 +30,7 @@ import os
 import re
 import tempfile
 import time
+import unicodedata
 import zipfile
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -34,11 +38,14 @@ from pathlib import Path
 
 from coursekit.grading.paths import repo_root
 from coursekit.grading.registry import EXERCISES, Exercise, get_exercise
-from coursekit.grading.runner import Limits, RunResult, read_test_sources, run_tests
+from coursekit.grading.runner import MAX_MODULE_BYTES, Limits, RunResult, read_test_sources, run_tests
 from coursekit.grading.scoring import TestScore, exercise_status, score_exercise
 from coursekit.atomic import atomic_write_text
 
 _SAFE = re.compile(r"[^A-Za-z0-9._-]+")
+# Latin letters that Unicode does not decompose into a base letter and an accent
+_LETTERS = {"ß": "ss", "ẞ": "SS", "æ": "ae", "Æ": "AE", "œ": "oe", "Œ": "OE", "ø": "o", "Ø": "O", "ł": "l",
+            "Ł": "L", "đ": "d", "Đ": "D", "ð": "d", "Ð": "D", "þ": "th", "Þ": "Th", "ı": "i"}
 
 
 @dataclass
@@ -48,12 +55,18 @@ class ExerciseGrade:
     exercise: Exercise
     scores: list[TestScore]
     status: str
-    """"ok", "missing", "timeout", "memory", "crashed", "tampered" or "error"."""
+    """"ok", "missing", "too_large" (the module is over MAX_MODULE_BYTES), "timeout", "memory", "crashed",
+    "output", "reference", "protocol" or "error"."""
     reason: str = ""
 
     @property
     def points(self) -> float:
         return round(sum(s.points for s in self.scores), 6)
+
+    @property
+    def max_points(self) -> float:
+        """What the exercise is worth: its registered tests plus its hidden ones."""
+        return round(sum(s.max_points for s in self.scores), 6)
 
 
 @dataclass
@@ -69,6 +82,11 @@ class StudentGrade:
     def points(self) -> float:
         return round(sum(g.points for g in self.grades), 6)
 
+    @property
+    def max_points(self) -> float:
+        """The one total every report shows (console, grades.csv, feedback, results.json)."""
+        return round(sum(g.max_points for g in self.grades), 6)
+
 
 @dataclass
 class GradeSummary:
@@ -83,8 +101,27 @@ class GradeSummary:
     """COURSEKIT_WORKER value in every worker's environment (to find leftovers)."""
 
 
-def _student_id(name: str, taken: set[str]) -> str:
-    base = _SAFE.sub("_", name).strip("._") or "student"
+def _ascii(name: str) -> str:
+    """``name`` in ASCII: accents dropped, a few Latin letters spelled out, other letters and digits
+    as their code point (so no letter is lost and two names stay apart)."""
+    out = []
+    for char in unicodedata.normalize("NFKD", name):
+        if char.isascii():
+            out.append(char)
+        elif unicodedata.combining(char):
+            continue
+        elif char in _LETTERS:
+            out.append(_LETTERS[char])
+        elif unicodedata.category(char)[0] in "LN":
+            out.append(f"u{ord(char):04x}")
+        else:
+            out.append("_")
+    return "".join(out)
+
+
+def student_id(name: str, taken: set[str]) -> str:
+    """The sanitised id of submission ``name`` (see the module docstring); adds it to ``taken``."""
+    base = _SAFE.sub("_", _ascii(name)).strip("._") or "student"
     candidate, i = base, 2
     while candidate in taken:
         candidate, i = f"{base}_{i}", i + 1
@@ -92,15 +129,18 @@ def _student_id(name: str, taken: set[str]) -> str:
     return candidate
 
 
-def discover(submissions: Path, out: Path | None = None) -> list[tuple[str, Path]]:
-    """(student id, folder or zip) for every submission, sorted by name (``out`` is skipped)."""
+def discover(submissions: Path, out: Path | None = None) -> tuple[list[tuple[str, Path]], list[str]]:
+    """((student id, folder or zip) for every submission, sorted by name; names of the entries skipped
+    because they start with ".") (``out`` is skipped too)."""
     if not submissions.is_dir():
         raise FileNotFoundError(f"submissions folder {str(submissions)!r} does not exist")
     skip = out.resolve() if out is not None else None
-    entries = [p for p in sorted(submissions.iterdir()) if not p.name.startswith(".")
-               and (p.is_dir() or p.suffix.lower() == ".zip") and p.resolve() != skip]
+    entries = [p for p in sorted(submissions.iterdir())
+               if (p.is_dir() or p.suffix.lower() == ".zip") and p.resolve() != skip]
+    hidden = [p.name for p in entries if p.name.startswith(".")]
     taken: set[str] = {"grades.csv"}  # never collide with the class CSV
-    return [(_student_id(p.stem if p.is_file() else p.name, taken), p) for p in entries]
+    return [(student_id(p.stem if p.is_file() else p.name, taken), p) for p in entries
+            if not p.name.startswith(".")], hidden
 
 
 def _module_folder(root: Path, exercises: list[Exercise]) -> Path:
@@ -114,36 +154,59 @@ def _module_folder(root: Path, exercises: list[Exercise]) -> Path:
     return root
 
 
-def _extract_zip(archive: Path, dest: Path, exercises: list[Exercise]) -> None:
-    """Copy only ``<id>.py`` members (any folder depth, size-capped) out of ``archive`` into ``dest``."""
-    from coursekit.grading.runner import MAX_MODULE_BYTES
+def extract_zip(archive: Path, dest: Path, exercises: list[Exercise]) -> dict[str, int]:
+    """Copy only ``<id>.py`` members (any folder depth, size-capped) out of ``archive`` into ``dest``.
 
+    Returns module name -> size in bytes of the members left out for being over MAX_MODULE_BYTES.
+    """
     wanted = {f"{e.id}.py" for e in exercises}
+    oversized: dict[str, int] = {}
     with zipfile.ZipFile(archive) as zf:
         members = sorted(zf.infolist(), key=lambda m: (m.filename.count("/"), m.filename))
         for member in members:
             name = member.filename.rsplit("/", 1)[-1]
-            if member.is_dir() or name not in wanted or (dest / name).exists() or "__MACOSX" in member.filename:
+            if member.is_dir() or name not in wanted or (dest / name).exists() or "__MACOSX" in member.filename \
+                    or name in oversized:
                 continue
             if member.file_size > MAX_MODULE_BYTES:
+                oversized[name] = member.file_size
                 continue
             with zf.open(member) as fh:
                 data = fh.read(MAX_MODULE_BYTES + 1)
             if len(data) <= MAX_MODULE_BYTES:
                 (dest / name).write_bytes(data)
+            else:  # the header understated the size
+                oversized[name] = max(len(data), member.file_size)
+    return oversized
+
+
+def _too_large(folder: Path, exercise: Exercise, oversized: dict[str, int]) -> str:
+    """Why the submitted module of ``exercise`` is not graded for its size ("" when it is fine)."""
+    name = f"{exercise.id}.py"
+    size = oversized.get(name)
+    if size is None and (folder / name).is_file():
+        size = (folder / name).stat().st_size
+    if size is None or size <= MAX_MODULE_BYTES:
+        return ""
+    return (f"{name} is {size / 2**20:.1f} MiB, over the {MAX_MODULE_BYTES / 2**20:g} MiB limit for a submitted "
+            "module: not graded")
 
 
 def _grade_student(exercises: list[Exercise], folder: Path, limits: Limits, sources: dict[str, bytes],
-                   hidden: tuple[dict[str, bytes], dict], mode: str, tag: str) -> list[ExerciseGrade]:
+                   hidden: tuple[dict[str, bytes], dict], mode: str, tag: str,
+                   oversized: dict[str, int]) -> list[ExerciseGrade]:
     """All exercises of one submission: one trusted test run, one sandboxed worker per exercise."""
-    present = [e for e in exercises if (folder / f"{e.id}.py").is_file()]
+    too_large = {e.id: _too_large(folder, e, oversized) for e in exercises}
+    present = [e for e in exercises if (folder / f"{e.id}.py").is_file() and not too_large[e.id]]
     run = run_tests(present, folder, limits, sources, hidden[0], mode=mode, tag=tag) if present else RunResult()
     grades = []
     for exercise in exercises:
         points = hidden[1].get(exercise.id, {})
         if exercise not in present:
-            missing = RunResult(status="missing", reason=f"{exercise.id}.py was not found in the submission")
-            grades.append(ExerciseGrade(exercise, score_exercise(exercise, missing, points), "missing", missing.reason))
+            status = "too_large" if too_large[exercise.id] else "missing"
+            reason = too_large[exercise.id] or f"{exercise.id}.py was not found in the submission"
+            skipped = RunResult(status=status, reason=reason)
+            grades.append(ExerciseGrade(exercise, score_exercise(exercise, skipped, points), status, reason))
             continue
         mine = [o for o in run.outcomes if o.file == f"test_{exercise.id}.py" or o.file in points]
         status = run.status if run.status != "ok" and not mine else exercise_status(exercise, mine)
@@ -188,7 +251,7 @@ def grade_submissions(submissions: str | Path, out: str | Path, exercises: list[
     limits = limits or Limits()
     chosen = [get_exercise(e) for e in exercises] if exercises else list(EXERCISES)
     submissions, out = Path(submissions), Path(out)
-    entries = discover(submissions, out)
+    entries, dot_entries = discover(submissions, out)
     hidden = load_hidden_tests(hidden_tests) if hidden_tests is not None else ({}, {})
     root = repo_root()
     sources = read_test_sources(chosen, root)
@@ -198,6 +261,7 @@ def grade_submissions(submissions: str | Path, out: str | Path, exercises: list[
     tag = f"coursekit-grade-{os.getpid()}-{time.monotonic_ns()}"
     before = _fingerprint(root, chosen)
     students = {sid: StudentGrade(sid, path.name) for sid, path in entries}
+    oversized: dict[str, dict[str, int]] = {sid: {} for sid, _ in entries}
 
     with tempfile.TemporaryDirectory(prefix="coursekit-submissions-") as unpack:
         tasks = []
@@ -207,7 +271,7 @@ def grade_submissions(submissions: str | Path, out: str | Path, exercises: list[
                 folder = Path(unpack) / sid
                 folder.mkdir()
                 try:
-                    _extract_zip(path, folder, chosen)
+                    oversized[sid] = extract_zip(path, folder, chosen)
                 except (zipfile.BadZipFile, OSError, ValueError, NotImplementedError) as exc:
                     students[sid].problem = f"could not read {path.name}: {type(exc).__name__}: {exc}"
             else:
@@ -217,13 +281,16 @@ def grade_submissions(submissions: str | Path, out: str | Path, exercises: list[
         from tqdm.auto import tqdm
 
         with ThreadPoolExecutor(max_workers=int(jobs)) as pool:
-            futures = [pool.submit(_grade_student, chosen, folder, limits, sources, hidden, mode, tag)
-                       for _, folder in tasks]
+            futures = [pool.submit(_grade_student, chosen, folder, limits, sources, hidden, mode, tag, oversized[sid])
+                       for sid, folder in tasks]
             for (sid, _), future in tqdm(zip(tasks, futures), total=len(tasks), desc="grading", disable=not progress):
                 students[sid].grades = future.result()
                 write_student(out, students[sid])  # a finished student is saved at once
 
     summary = GradeSummary(list(students.values()), chosen, out, time.monotonic() - start, mode=mode, tag=tag)
+    if dot_entries:
+        summary.warnings.append(f"not graded (the name starts with '.'): {', '.join(dot_entries)}; rename a "
+                                "student's submission to grade it")
     after = _fingerprint(root, chosen)
     for path, digest in before.items():
         if after.get(path) != digest:
@@ -242,10 +309,8 @@ def class_csv(summary: GradeSummary) -> str:
         by_id = {g.exercise.id: g for g in student.grades}
         notes = [student.problem] if student.problem else []
         notes += [f"{g.exercise.id}: {g.status}" for g in student.grades if g.status != "ok"]
-        max_total = sum(s.max_points for g in student.grades for s in g.scores) or \
-            sum(e.max_points for e in summary.exercises)
         writer.writerow([student.student, student.folder, *(f"{by_id[i].points:g}" if i in by_id else "0" for i in ids),
-                         f"{student.points:g}", f"{max_total:g}", "; ".join(notes)])
+                         f"{student.points:g}", f"{student.max_points:g}", "; ".join(notes)])
     return buffer.getvalue()
 
 

@@ -17,6 +17,7 @@ so the tests stay secret; ``coursekit check`` (students) never runs them.
 from __future__ import annotations
 
 import ast
+import math
 from pathlib import Path
 
 from coursekit.grading.registry import get_exercise
@@ -42,12 +43,17 @@ def load_hidden_tests(folder: str | Path) -> tuple[dict[str, bytes], dict[str, d
         raise FileNotFoundError(f"hidden tests folder {str(folder)!r} does not exist")
     sources: dict[str, bytes] = {}
     points: dict[str, dict[str, dict[str, float]]] = {}
-    for path in sorted(folder.glob("*.py")):
-        if path.name == "conftest.py":
-            continue
+    files = [p for p in sorted(folder.glob("*.py")) if p.name != "conftest.py"]
+    if not files:
+        raise ValueError(f"hidden tests folder {str(folder)!r} holds no test files (*.py other than conftest.py): "
+                         "give a folder of hidden tests or leave out --hidden-tests")
+    for path in files:
         data = path.read_bytes()
-        tree = ast.parse(data, filename=str(path))
-        exercise = get_exercise(str(_constant(tree, "EXERCISE", path)))
+        tree = _parse(data, path)
+        try:
+            exercise = get_exercise(str(_constant(tree, "EXERCISE", path)))
+        except ValueError as exc:
+            raise ValueError(f"{path}: {exc}" if str(path) not in str(exc) else str(exc)) from None
         table = _constant(tree, "POINTS", path)
         functions = {n.name for n in tree.body if isinstance(n, ast.FunctionDef) and n.name.startswith("test_")}
         if not isinstance(table, dict) or not table:
@@ -55,9 +61,27 @@ def load_hidden_tests(folder: str | Path) -> tuple[dict[str, bytes], dict[str, d
         for test, value in table.items():
             if test not in functions:
                 raise ValueError(f"{path}: POINTS names {test!r}, which is not a test function in the file")
-            if not isinstance(value, (int, float)) or value <= 0:
-                raise ValueError(f"{path}: points of {test!r} must be > 0, got {value!r}")
+            _check_points(path, test, value)
         name = path.name if path.name.startswith("hidden_") else f"hidden_{path.name}"
         sources[name] = data
         points.setdefault(exercise.id, {})[name] = {t: float(v) for t, v in table.items()}
     return sources, points
+
+
+def _parse(data: bytes, path: Path) -> ast.Module:
+    """The file's syntax tree; ValueError naming the file for bytes that are not UTF-8 or not Python."""
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path}: not UTF-8 text (byte 0x{data[exc.start]:02x} at offset {exc.start}): "
+                         "save the hidden test file as UTF-8") from None
+    try:
+        return ast.parse(text, filename=str(path))
+    except SyntaxError as exc:
+        raise ValueError(f"{path}: line {exc.lineno}: {exc.msg}") from None
+
+
+def _check_points(path: Path, test: str, value) -> None:
+    """Points must be a finite number > 0 (a bool is not a number of points: True would count as 1)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+        raise ValueError(f"{path}: points of {test!r} must be a finite number > 0, got {value!r}")
