@@ -59,7 +59,8 @@ def lock_file_of(output: str | os.PathLike) -> Path:
     return output.parent / f".{name}{LOCK_SUFFIX}"
 
 
-def _lstat(path: Path) -> os.stat_result | None:
+def lstat_or_none(path: Path) -> os.stat_result | None:
+    """``os.lstat(path)`` (the entry itself, never a link's target), or None where nothing is there."""
     try:
         return os.lstat(path)
     except (FileNotFoundError, NotADirectoryError):
@@ -68,7 +69,7 @@ def _lstat(path: Path) -> os.stat_result | None:
 
 def _remove(path: Path) -> bool:
     """Remove the file or folder ``path`` without following a link at it; False if there was nothing."""
-    st = _lstat(path)
+    st = lstat_or_none(path)
     if st is None or stat.S_ISLNK(st.st_mode):
         return False  # coursekit never makes links: a link at a recorded name is left alone
     if stat.S_ISDIR(st.st_mode):
@@ -161,7 +162,7 @@ class OutputLock:
                 continue  # not a name coursekit gives: never touched, whatever the file says
             path = self.directory / rel
             previous = path / "previous"
-            if rel.endswith(".old") and _lstat(self.output) is None and previous.is_dir() and not previous.is_symlink():
+            if rel.endswith(".old") and lstat_or_none(self.output) is None and previous.is_dir() and not previous.is_symlink():
                 os.replace(previous, self.output)  # killed between the two renames of replace_dir's fallback
             if _remove(path):
                 self.swept.append(path)
@@ -185,7 +186,7 @@ class OutputLock:
     def _open_locked(cls, output: Path, shown: str) -> OutputLock:
         lock_file = lock_file_of(output)
         for _ in range(100):  # each retry follows a holder that released between our open and our lock
-            st = _lstat(lock_file)
+            st = lstat_or_none(lock_file)
             if st is not None and not stat.S_ISREG(st.st_mode):
                 raise ValueError(f"{shown}: {str(lock_file)!r} exists and is not coursekit's lock file (it is not a "
                                  f"regular file); remove it, or choose another path")
@@ -200,7 +201,7 @@ class OutputLock:
                 holder = _holder(fd)
                 os.close(fd)
                 raise ValueError(busy(shown, holder)) from None
-            now = _lstat(lock_file)
+            now = lstat_or_none(lock_file)
             if now is None or (now.st_ino, now.st_dev) != (os.fstat(fd).st_ino, os.fstat(fd).st_dev):
                 os.close(fd)  # the holder removed this file after we opened it: lock the one there now
                 continue
@@ -227,13 +228,13 @@ class OutputLock:
             for rel in list(self.temporaries):
                 _remove(self.directory / rel)
             self.temporaries.clear()
-            now = _lstat(self.lock_file)
+            now = lstat_or_none(self.lock_file)
             if now is not None and (now.st_ino, now.st_dev) == (os.fstat(self._fd).st_ino, os.fstat(self._fd).st_dev):
                 self.lock_file.unlink()  # while still locked: nobody can be holding the file we remove
         finally:
             os.close(self._fd)
             self._fd = -1
-            if _lstat(self.output) is None:
+            if lstat_or_none(self.output) is None:
                 _remove_empty(self.created_dirs)
 
     def __enter__(self) -> OutputLock:
@@ -282,7 +283,7 @@ def _holder(fd: int) -> str:
 def _make_dirs(folder: Path) -> list[Path]:
     """``mkdir -p folder``; returns the folders it created, outermost first."""
     missing = []
-    while _lstat(folder) is None and folder != folder.parent:
+    while lstat_or_none(folder) is None and folder != folder.parent:
         missing.append(folder)
         folder = folder.parent
     for path in reversed(missing):

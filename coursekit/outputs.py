@@ -47,20 +47,13 @@ import sys
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
-from coursekit.output_lock import OutputLock, busy, holder_of, lock_output
+from coursekit.output_lock import OutputLock, busy, holder_of, lock_output, lstat_or_none
 
 _RENAME_EXCHANGE = 2
 _AT_FDCWD = -100
 
 Foreign = Callable[[Path], "str | None"]
 """Given an existing output path: None if it is provably one coursekit wrote, else why not (naming the foreign file)."""
-
-
-def _lstat(path: Path) -> os.stat_result | None:
-    try:
-        return os.lstat(path)
-    except (FileNotFoundError, NotADirectoryError):
-        return None
 
 
 def kind_of(mode: int) -> str:
@@ -75,7 +68,7 @@ def kind_of(mode: int) -> str:
 
 def regular_file(path: str | os.PathLike) -> bool:
     """True if ``path`` is a regular file itself (not a link, FIFO, device...): safe to open and read."""
-    st = _lstat(Path(path))
+    st = lstat_or_none(Path(path))
     return st is not None and stat.S_ISREG(st.st_mode)
 
 
@@ -138,14 +131,14 @@ def check_output(path: str | os.PathLike, *, what: str, foreign: Foreign | None,
         if directory and target in source.parents:
             raise ValueError(f"{shown} contains the input {str(given)!r}: choose an output path outside the inputs")
     ancestor = target.parent
-    while (up := _lstat(ancestor)) is None:
+    while (up := lstat_or_none(ancestor)) is None:
         ancestor = ancestor.parent
     if not stat.S_ISDIR(up.st_mode):
         raise ValueError(f"{shown}: {str(ancestor)!r} is a {kind_of(up.st_mode)}, so nothing can be written inside it; "
                          f"choose another path")
     if not os.access(ancestor, os.W_OK | os.X_OK):
         raise ValueError(f"{shown}: the folder {str(ancestor)!r} is not writable")
-    st = _lstat(path)
+    st = lstat_or_none(path)
     if st is None:
         return path
     return _check_existing(path, st, shown, what=what, foreign=foreign, directory=directory, overwrite=overwrite)
@@ -236,7 +229,7 @@ def replace_dir(new: str | os.PathLike, path: str | os.PathLike, lock: OutputLoc
     old folder waits in a recorded ``.old`` temporary between two renames (see the module docstring).
     """
     new, path = Path(new), Path(path)
-    st = _lstat(path)
+    st = lstat_or_none(path)
     if st is None:
         os.replace(new, path)
         return

@@ -19,6 +19,7 @@ import pytest
 
 pytest.importorskip("mujoco")
 
+from conftest import assert_refused_in_one_line
 from coursekit.cli import main  # noqa: E402
 from coursekit.data.episodes import EpisodeDataset  # noqa: E402
 
@@ -92,8 +93,6 @@ def area(tmp_path, originals):
     return tmp_path
 
 
-def _snapshot(root: Path) -> dict[str, bytes | None]:
-    return {str(p.relative_to(root)): (p.read_bytes() if p.is_file() else None) for p in sorted(root.rglob("*"))}
 
 
 CASES = [
@@ -142,16 +141,7 @@ CASES = [
 
 @pytest.mark.parametrize("line,expected", CASES, ids=[c[0].replace("{A}/", "")[:60] for c in CASES])
 def test_bad_input_is_one_clear_line_and_touches_nothing(area, capsys, line, expected):
-    argv = [a.replace("{A}", str(area)) for a in line.split()]
-    before = _snapshot(area)
-    rc = main(argv)
-    err = capsys.readouterr().err
-    assert rc == 2, err
-    assert err.count("\n") == 1 and err.endswith("\n"), f"not one line:\n{err}"
-    assert err.startswith(f"coursekit {argv[0]}") and ": error: " in err, err
-    assert "Traceback" not in err
-    assert expected.replace("{A}", str(area)) in err, err
-    assert _snapshot(area) == before, "a pre-existing file changed, or something was written"
+    assert_refused_in_one_line(main, [a.replace("{A}", str(area)) for a in line.split()], area, expected, capsys)
 
 
 def test_the_broken_folders_differ_from_a_good_one_only_where_intended(area, tmp_path):
