@@ -91,4 +91,4 @@ def test_one_grading_run_gives_every_student_a_clear_row(tmp_path, capsys):
     result = json.loads((out / "emile" / "results.json").read_text())
     assert result["score"] == full and f"{full:g} / {full:g} points" in result["output"]
     assert f"Total: **{full:g} / {full:g}**" in (out / "emile" / "feedback.md").read_text()
-    assert sorted(p.name for p in out.iterdir()) == ["emile", "grades.csv", "huge", "zipped"]
+    assert sorted(p.name for p in out.iterdir()) == [".coursekit-grade.json", "emile", "grades.csv", "huge", "zipped"]

@@ -135,7 +135,10 @@ def test_delayed_episodes_are_as_recorded(policies, golden, name):
         return
     for key, value in got.items():
         want = golden[f"episode/{name}/{key}"]
-        if key == "smoothness":  # the jerk is one third-difference formula; its rounding order may differ in ulps
+        if key in ("smoothness", "max_reward"):
+            # ulps only: the jerk is one third-difference formula whose rounding order may differ, and the
+            # coverage (max_reward) now comes from element-wise T corners (coursekit.envs.pusht_geometry)
+            # instead of a BLAS product; actions, states and success stay bit-exact.
             np.testing.assert_allclose(value, want, rtol=1e-12, atol=0, err_msg=f"{name}: {key}")
         else:
             np.testing.assert_array_equal(value, want, err_msg=f"{name}: {key}")
