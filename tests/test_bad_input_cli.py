@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import assert_refused_in_one_line
+from cli_refusals import assert_refused_in_one_line
 from coursekit.cli import main
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")

@@ -19,7 +19,7 @@ import pytest
 
 pytest.importorskip("mujoco")
 
-from conftest import assert_refused_in_one_line
+from cli_refusals import assert_refused_in_one_line
 from coursekit.cli import main  # noqa: E402
 from coursekit.data.episodes import EpisodeDataset  # noqa: E402
 
