@@ -372,14 +372,6 @@ def test_new_weights_carry_type_and_digest_in_their_metadata(tmp_path):
 
 # ---- any hand edit of config.json: refused in one line naming the entry, or harmless ---------------
 
-def _json_paths(d: dict, prefix: tuple = ()) -> list[tuple]:
-    out = []
-    for k, v in d.items():
-        out.append(prefix + (k,))
-        if isinstance(v, dict):
-            out += _json_paths(v, prefix + (k,))
-    return out
-
 
 json_junk = st.recursive(st.none() | st.booleans() | st.integers(-3, 10**20) | st.floats(allow_nan=False, allow_infinity=False)
                          | st.text(max_size=6), lambda c: st.lists(c, max_size=3) | st.dictionaries(st.text(max_size=4), c, max_size=3),
@@ -400,7 +392,7 @@ def test_any_edit_of_config_json_is_one_clear_line_or_harmless(pusht_ckpt, tmp_p
     from coursekit.cli import main
 
     info = json.loads((pusht_ckpt / "config.json").read_text())
-    path = data.draw(st.sampled_from(_json_paths(info)))
+    path = data.draw(st.sampled_from(_paths(info)))
     bad = json.loads(json.dumps(info))
     dropped = data.draw(st.booleans())
     if dropped:
