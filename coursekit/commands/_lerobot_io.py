@@ -15,6 +15,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+from coursekit.data.episodes import dataset_foreign
 from coursekit.output_lock import OutputLock
 from coursekit.outputs import claim_output, replace_dir, staging_dir
 
@@ -35,11 +36,6 @@ def _export_foreign(path: Path) -> str | None:
     names = sorted(p.name for p in path.iterdir())
     return f"it holds {', '.join(names[:3])}{', ...' if len(names) > 3 else ''}"
 
-
-def _dataset_foreign(path: Path) -> str | None:
-    from coursekit.data.episodes import is_dataset_file
-
-    return None if is_dataset_file(path) else "it lacks the members every coursekit dataset has"
 
 
 @contextlib.contextmanager
@@ -67,5 +63,5 @@ def write_export_folder(out: Path, lock: OutputLock, write: Callable[[Path], Any
 
 def claim_import_out(out: Path, folder: Path, overwrite: bool) -> contextlib.AbstractContextManager[OutputLock]:
     """Before any work: OUT is a new .npz, or (with --overwrite) a coursekit data set; never inside the input."""
-    return _claimed(out, what="coursekit dataset", foreign=_dataset_foreign, directory=False, overwrite=overwrite,
+    return _claimed(out, what="coursekit dataset", foreign=dataset_foreign, directory=False, overwrite=overwrite,
                     inputs=[folder], flag="OUT")

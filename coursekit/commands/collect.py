@@ -38,6 +38,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from coursekit.data.episodes import dataset_foreign
     from coursekit.outputs import claim_output
 
     task = get_task(args.task)
@@ -71,10 +72,3 @@ def run(args: argparse.Namespace) -> int:
     seconds = time.perf_counter() - start
     print(f"wrote {out}: {dataset.n_episodes} episodes, {dataset.n_steps} steps in {seconds:.1f} s")
     return 0
-
-
-def dataset_foreign(path: Path) -> str | None:
-    """None if the (regular) file ``path`` is a coursekit dataset, else why it is not one (for check_output)."""
-    from coursekit.data.episodes import is_dataset_file
-
-    return None if is_dataset_file(path) else "it lacks the members every coursekit dataset has"

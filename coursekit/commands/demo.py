@@ -124,11 +124,6 @@ def _figure_foreign(path: Path) -> str | None:
     return None if _png_software(path) == FIGURE_SOFTWARE else f"it is not a PNG with Software '{FIGURE_SOFTWARE}'"
 
 
-def _dataset_foreign(path: Path) -> str | None:
-    from coursekit.data.episodes import is_dataset_file
-
-    return None if is_dataset_file(path) else "it lacks the members every coursekit dataset has"
-
 
 def _check_demo_outputs(out: Path, args: argparse.Namespace) -> None:
     """Before any work: --out must be a (possibly new) folder; the tour replaces only its own three files there.
@@ -137,11 +132,12 @@ def _check_demo_outputs(out: Path, args: argparse.Namespace) -> None:
     provably the tour's: a coursekit dataset, a page ending with :data:`PAGE_MARK`, a PNG whose
     ``Software`` is :data:`FIGURE_SOFTWARE`.
     """
+    from coursekit.data.episodes import dataset_foreign
     from coursekit.outputs import check_output
 
     check_output(out, what="folder", foreign=lambda p: None, directory=True, overwrite=True)
     data, page, figure = _outputs(out, args)
-    check_output(data, what="coursekit dataset", foreign=_dataset_foreign, directory=False, overwrite=True)
+    check_output(data, what="coursekit dataset", foreign=dataset_foreign, directory=False, overwrite=True)
     check_output(page, what="coursekit demo page", foreign=_page_foreign, directory=False, overwrite=True)
     check_output(figure, what="coursekit demo figure", foreign=_figure_foreign, directory=False, overwrite=True)
 

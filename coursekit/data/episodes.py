@@ -209,3 +209,8 @@ def is_dataset_file(path: str | os.PathLike) -> bool:
             return {f"{_META_KEY}.npy", f"{_ENDS_KEY}.npy"} <= set(zf.namelist())
     except (OSError, zipfile.BadZipFile, ValueError, RuntimeError, NotImplementedError):
         return False
+
+
+def dataset_foreign(path: str | os.PathLike) -> str | None:
+    """None if the file ``path`` is a coursekit dataset, else why not (``coursekit.outputs.check_output``'s ``foreign``)."""
+    return None if is_dataset_file(path) else "it lacks the members every coursekit dataset has"
