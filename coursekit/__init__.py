@@ -36,7 +36,7 @@ _LAZY = {
     "train": "coursekit.train:",
     "evaluate": "coursekit.evaluate:",
     "teleop": "coursekit.teleop:",
-    "check": "coursekit.grading.check:check",
+    "check": "coursekit.grading.notebook:check",
 }
 
 __all__ = sorted(_LAZY) + ["__version__"]

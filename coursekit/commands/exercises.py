@@ -16,7 +16,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from coursekit.grading.build import build_exercises
-    from coursekit.grading.registry import EXERCISES, exercise_number
+    from coursekit.grading.exercises import EXERCISES, exercise_number
 
     if args.action == "list":
         for e in EXERCISES:

@@ -20,8 +20,7 @@ import importlib.util
 from dataclasses import dataclass
 from pathlib import Path
 
-from coursekit.grading.paths import repo_root
-from coursekit.grading.registry import EXERCISES, Exercise, exercise_number
+from coursekit.grading.exercises import EXERCISES, Exercise, exercise_number, repo_root
 
 BEGIN = "# BEGIN SOLUTION"
 END = "# END SOLUTION"

@@ -25,10 +25,10 @@ import tempfile
 import zipfile
 from pathlib import Path
 
-from coursekit.grading.paths import repo_root
-from coursekit.grading.registry import EXERCISES, get_exercise
-from coursekit.grading.runner import Limits
 from coursekit.atomic import atomic_write_text
+from coursekit.grading.exercises import EXERCISES, get_exercise, repo_root
+from coursekit.grading.report import load_hidden_tests
+from coursekit.grading.sandbox import Limits
 
 SETUP = """#!/usr/bin/env bash
 # Gradescope image build (Ubuntu, root): bubblewrap, Python >= 3.11 and the pinned environment.
@@ -76,15 +76,13 @@ def _package_files(package: Path):
 def write_autograder(zip_path: str | Path, exercises: list[str] | None = None, hidden_tests: str | Path | None = None,
                      limits: Limits | None = None) -> Path:
     """Write the autograder zip (refuses to overwrite an existing file); returns its path."""
-    from coursekit.grading.hidden import load_hidden_tests
-
     zip_path = Path(zip_path)
     if zip_path.exists():
         raise ValueError(f"{zip_path} already exists: choose a new name (nothing was written)")
     if not zip_path.parent.is_dir():
         raise FileNotFoundError(f"folder {str(zip_path.parent)!r} does not exist")
     chosen = [get_exercise(e) for e in exercises] if exercises else list(EXERCISES)
-    hidden = load_hidden_tests(hidden_tests)[0] if hidden_tests is not None else {}
+    hidden = load_hidden_tests(hidden_tests).sources if hidden_tests is not None else {}
     limits = limits or Limits()
     root = repo_root()
     config = {"exercises": [e.id for e in chosen],

@@ -24,8 +24,9 @@ import os
 
 import pytest
 
-from coursekit.grading.harness import grading_settings
-from coursekit.grading.remote import RemoteModule, Sandbox
+from coursekit.grading.exercises import exercise_dir, repo_root
+from coursekit.grading.sandbox import Limits, RemoteModule, Sandbox
+from coursekit.grading.trusted import grading_settings
 
 if not os.environ.get("COURSEKIT_EXERCISES"):
     collect_ignore_glob = ["test_*.py"]
@@ -35,13 +36,11 @@ if not os.environ.get("COURSEKIT_EXERCISES"):
 def sandbox(request, tmp_path_factory):
     """The worker for this module's exercise (restarted by itself after a crash or a timeout)."""
     settings = grading_settings(request.config) or {}
-    from coursekit.grading.paths import exercise_dir, repo_root
-
     folder = settings.get("submission") or str(exercise_dir())
-    box = Sandbox(request.module.EXERCISE, folder, tmp_path_factory.mktemp("worker"),
-                  test_timeout=float(settings.get("test_timeout", 60)), budget=float(settings.get("budget", 600)),
-                  memory_mb=int(settings.get("memory_mb", 2048)), output_mb=int(settings.get("file_mb", 32)),
-                  disk_mb=int(settings.get("disk_mb", 64)), mode=settings.get("mode"),
+    limits = Limits(timeout_s=float(settings.get("budget", 600)), test_timeout_s=float(settings.get("test_timeout", 60)),
+                    memory_mb=int(settings.get("memory_mb", 2048)), output_mb=int(settings.get("file_mb", 32)),
+                    disk_mb=int(settings.get("disk_mb", 64)))
+    box = Sandbox(request.module.EXERCISE, folder, tmp_path_factory.mktemp("worker"), limits, mode=settings.get("mode"),
                   solutions_dir=settings.get("solutions_dir") or str(repo_root() / "solutions"),
                   tag=settings.get("tag", ""), reap=bool(settings))
     yield box
