@@ -18,9 +18,8 @@ import time
 from pathlib import Path
 
 from benchmarks.results import record
+from coursekit.grading.exercises import EXERCISES, repo_root
 from coursekit.grading.grade import grade_submissions
-from coursekit.grading.paths import repo_root
-from coursekit.grading.registry import EXERCISES
 
 COMMAND = ".venv/bin/python -m benchmarks.bench_grading"
 SECTION = "Grading"

@@ -43,7 +43,7 @@ _LAZY = {
     "evaluate": "coursekit.evaluate:",
     "teleop": "coursekit.teleop:",
     "tasks": "coursekit.tasks:",
-    "check": "coursekit.grading.check:check",
+    "check": "coursekit.grading.notebook:check",
 }
 
 __all__ = sorted(_LAZY) + ["__version__"]

@@ -18,11 +18,10 @@ from pathlib import Path
 
 import pytest
 
-from coursekit.grading import sandbox
+from coursekit.grading import bubblewrap
+from coursekit.grading.exercises import get_exercise, repo_root
 from coursekit.grading.grade import grade_submissions
-from coursekit.grading.paths import repo_root
-from coursekit.grading.registry import get_exercise
-from coursekit.grading.runner import Limits
+from coursekit.grading.sandbox import Limits
 
 pytestmark = pytest.mark.slow  # ~24 students x 2 exercises: ~1-3 min on 2 busy cores
 ATTACKS = Path(__file__).parent / "grading_corpus" / "attacks"
@@ -100,7 +99,7 @@ def _leftovers(tag: str) -> list[int]:
 
 def _grade(tmp: Path, attacks, mode: str):
     with pytest.MonkeyPatch.context() as mp:
-        mp.setenv(sandbox.MODE_ENV, mode)
+        mp.setenv(bubblewrap.MODE_ENV, mode)
         before, home_before = _fingerprint(), set(os.listdir(Path.home()))
         out = tmp / "out"
         summary = grade_submissions(_submissions(tmp, attacks), out, EXERCISES, jobs=2, limits=LIMITS, progress=False)
@@ -116,7 +115,7 @@ def _grade(tmp: Path, attacks, mode: str):
 
 @pytest.fixture(scope="module")
 def with_bwrap(tmp_path_factory):
-    if sandbox.mode() != "bwrap" and os.environ.get(sandbox.MODE_ENV, "auto") != "none":
+    if bubblewrap.mode() != "bwrap" and os.environ.get(bubblewrap.MODE_ENV, "auto") != "none":
         pytest.skip("bubblewrap is not usable here (install the `bubblewrap` package)")
     return _grade(tmp_path_factory.mktemp("attacks"), EXPECTED, "bwrap")
 

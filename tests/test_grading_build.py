@@ -10,8 +10,7 @@ import pytest
 
 from coursekit.cli import main
 from coursekit.grading.build import build_exercises, expected_files, render_exercise
-from coursekit.grading.paths import repo_root
-from coursekit.grading.registry import EXERCISES, Exercise
+from coursekit.grading.exercises import EXERCISES, Exercise, repo_root
 
 
 def test_committed_folders_match_a_fresh_build():

@@ -6,8 +6,7 @@ import pytest
 
 import coursekit
 from coursekit.cli import main
-from coursekit.grading.paths import repo_root
-from coursekit.grading.registry import get_exercise
+from coursekit.grading.exercises import get_exercise, repo_root
 
 
 def test_check_on_solutions_and_on_the_stub(capsys):
@@ -65,9 +64,9 @@ def test_grade_cli_rejects_bad_input(tmp_path, capsys):
 def test_zip_members_are_flattened_and_size_capped(tmp_path):
     import zipfile
 
+    from coursekit.grading.exercises import EXERCISES
     from coursekit.grading.grade import extract_zip
-    from coursekit.grading.registry import EXERCISES
-    from coursekit.grading.runner import MAX_MODULE_BYTES
+    from coursekit.grading.trusted import MAX_MODULE_BYTES
 
     archive = tmp_path / "s.zip"
     with zipfile.ZipFile(archive, "w") as zf:
@@ -84,21 +83,19 @@ def test_zip_members_are_flattened_and_size_capped(tmp_path):
 
 
 def test_partial_credit_hints_by_failure_kind_and_hidden_tests():
-    from coursekit.grading.runner import Outcome, RunResult, score_exercise
-    from coursekit.grading.scoring import LEADS, exercise_status
+    from coursekit.grading.report import LEADS, TestOutcome, exercise_status, score_exercise
 
     exercise = get_exercise("chunk_windows")
     file = "test_chunk_windows.py"
-    outcomes = [Outcome(f"{file}::{name}", "passed") for name in exercise.tests
+    outcomes = [TestOutcome(f"{file}::{name}", "passed") for name in exercise.tests
                 if name not in ("test_matches_library_on_random_datasets", "test_edge_padding", "test_window_count")]
-    outcomes += [Outcome(f"{file}::test_matches_library_on_random_datasets[{i}]", o, "boom" if o == "failed" else "",
-                         kind="value" if o == "failed" else "")
+    outcomes += [TestOutcome(f"{file}::test_matches_library_on_random_datasets[{i}]", o, "boom" if o == "failed" else "",
+                             kind="value" if o == "failed" else "")
                  for i, o in enumerate(["passed", "failed", "passed", "not run"])]
-    outcomes.append(Outcome(f"{file}::test_edge_padding", "failed", "ValueError: nope", kind="error", cause="error"))
-    outcomes.append(Outcome(f"{file}::test_window_count", "failed", "Timeout (>1s)", kind="timeout", cause="timeout"))
-    outcomes.append(Outcome("hidden_x.py::test_secret", "failed", "secret message", "secret traceback", kind="value"))
-    run = RunResult(outcomes=outcomes)
-    scores = {s.name: s for s in score_exercise(exercise, run, {"hidden_x.py": {"test_secret": 2.0}})}
+    outcomes.append(TestOutcome(f"{file}::test_edge_padding", "failed", "ValueError: nope", kind="error", cause="error"))
+    outcomes.append(TestOutcome(f"{file}::test_window_count", "failed", "Timeout (>1s)", kind="timeout", cause="timeout"))
+    outcomes.append(TestOutcome("hidden_x.py::test_secret", "failed", "secret message", "secret traceback", kind="value"))
+    scores = {s.name: s for s in score_exercise(exercise, outcomes, "", {"hidden_x.py": {"test_secret": 2.0}})}
     random = scores["test_matches_library_on_random_datasets"]
     assert random.points == exercise.tests[random.name][0] * 2 / 4 and not random.passed
     assert random.message == "2/4 cases failed; first: boom"
@@ -109,7 +106,10 @@ def test_partial_credit_hints_by_failure_kind_and_hidden_tests():
     secret = scores["test_secret"]
     assert secret.hidden and secret.max_points == 2 and secret.points == 0
     assert secret.hint == secret.message == secret.detail == "", "a hidden test shows name, points and pass/fail only"
-    assert exercise_status(exercise, outcomes) == "timeout"
+    assert exercise_status(outcomes) == "timeout"
+    missing = score_exercise(exercise, [], "chunk_windows.py was not found in the submission")
+    assert [s.message for s in missing] == ["chunk_windows.py was not found in the submission"] * len(exercise.tests)
+    assert all(s.outcome == "not run" and s.kind == "error" and s.points == 0 for s in missing)
 
 
 @pytest.mark.slow
@@ -130,16 +130,16 @@ def test_one_wrong_function_fails_only_its_own_tests(tmp_path):
 def test_without_bwrap_grading_says_so_once(tmp_path, monkeypatch, capsys):
     import shutil
 
-    from coursekit.grading import sandbox
+    from coursekit.grading import bubblewrap
     from coursekit.grading.grade import grade_submissions
 
     for name in ("ann", "ben"):
         (tmp_path / "subs" / name).mkdir(parents=True)
         shutil.copy(repo_root() / "solutions" / "chunk_windows.py", tmp_path / "subs" / name)
-    monkeypatch.setenv(sandbox.MODE_ENV, "none")
+    monkeypatch.setenv(bubblewrap.MODE_ENV, "none")
     summary = grade_submissions(tmp_path / "subs", tmp_path / "out", ["chunk_windows"], jobs=2, progress=False)
     assert summary.mode == "none" and all(s.points == 10 for s in summary.students)
-    assert capsys.readouterr().out.count(sandbox.NOT_ISOLATED) == 1
-    monkeypatch.setenv(sandbox.MODE_ENV, "sometimes")
+    assert capsys.readouterr().out.count(bubblewrap.NOT_ISOLATED) == 1
+    monkeypatch.setenv(bubblewrap.MODE_ENV, "sometimes")
     with pytest.raises(ValueError, match="COURSEKIT_SANDBOX must be auto, bwrap or none, got 'sometimes'"):
-        sandbox.mode()
+        bubblewrap.mode()

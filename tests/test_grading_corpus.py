@@ -12,9 +12,10 @@ from pathlib import Path
 import pytest
 
 from coursekit.cli import main
+from coursekit.grading.exercises import repo_root
 from coursekit.grading.grade import grade_submissions
-from coursekit.grading.paths import repo_root
-from coursekit.grading.runner import Limits, _interpret, RunResult
+from coursekit.grading.sandbox import Limits
+from coursekit.grading.trusted import RunResult, interpret_messages
 
 pytestmark = pytest.mark.slow  # ~20 subprocesses, two of them endless loops: ~30-60 s on 2 busy cores
 CORPUS = Path(__file__).parent / "grading_corpus"
@@ -148,8 +149,8 @@ def test_only_nonce_tagged_lines_count():
     ]
     data = ("\n".join(json.dumps(x) for x in lines) + "\nnot json\n").encode()
     result = RunResult()
-    _interpret(data, nonce, 0, LIMITS, result)
-    outcomes = {o.nodeid: o for o in result.outcomes}
+    interpret_messages(data, nonce, 0, result)
+    outcomes = {o.name: o for o in result.outcomes}
     assert outcomes["test_x.py::test_a"].outcome == "failed" and outcomes["test_x.py::test_a"].message == "boom"
     assert outcomes["test_x.py::test_b"].outcome == "failed"
     assert result.status == "crashed" and "did not finish" in outcomes["test_x.py::test_b"].message

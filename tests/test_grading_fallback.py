@@ -8,8 +8,8 @@ import pytest
 
 import coursekit.grading
 from coursekit.grading import EXERCISES, exercise_or_reference
-from coursekit.grading.fallback import BANNER_PREFIX, is_stub
-from coursekit.grading.paths import repo_root
+from coursekit.grading.exercises import repo_root
+from coursekit.grading.notebook import BANNER_PREFIX, is_stub
 
 
 @pytest.mark.parametrize("exercise", EXERCISES, ids=[e.id for e in EXERCISES])

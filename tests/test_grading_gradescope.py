@@ -13,8 +13,7 @@ from pathlib import Path
 import pytest
 
 from coursekit.cli import main
-from coursekit.grading.paths import repo_root
-from coursekit.grading.registry import get_exercise
+from coursekit.grading.exercises import get_exercise, repo_root
 
 pytestmark = pytest.mark.slow  # one grading run: ~5-15 s
 

@@ -1,4 +1,4 @@
-"""Hidden tests (coursekit/grading/hidden.py): a bad hidden test folder is refused with ONE line naming
+"""Hidden tests (coursekit/grading/report.py): a bad hidden test folder is refused with ONE line naming
 the file, the test and the bad value, before any grading, and nothing is written (issue 22, items 8, 10)."""
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ import zipfile
 import pytest
 
 from coursekit.cli import main
-from coursekit.grading.hidden import load_hidden_tests
-from coursekit.grading.paths import repo_root
+from coursekit.grading.exercises import repo_root
+from coursekit.grading.report import HiddenTests, load_hidden_tests
 
 GOOD = '''
 EXERCISE = "chunk_windows"
@@ -51,9 +51,10 @@ def _grade_refuses(tmp_path, capsys, hidden, *expected: str) -> None:
 
 
 def test_a_good_folder_loads(tmp_path):
-    sources, points = load_hidden_tests(_folder(tmp_path, GOOD))
-    assert list(sources) == ["hidden_test_more.py"] and sources["hidden_test_more.py"] == GOOD.encode()
-    assert points == {"chunk_windows": {"hidden_test_more.py": {"test_one": 2.0, "test_two": 0.5}}}
+    hidden = load_hidden_tests(_folder(tmp_path, GOOD))
+    assert hidden == HiddenTests({"hidden_test_more.py": GOOD.encode()},
+                                 {"chunk_windows": {"hidden_test_more.py": {"test_one": 2.0, "test_two": 0.5}}})
+    assert hidden.files_for(["chunk_windows", "kl"]) == ["hidden_test_more.py"] and hidden.files_for(["kl"]) == []
 
 
 @pytest.mark.parametrize("value", ["1e999", "-1e999", "True", "False", "0", "-2", "'3'", "None"])

@@ -7,7 +7,7 @@ import shutil
 import pytest
 
 from coursekit.grading import load_exercise
-from coursekit.grading.paths import exercise_dir, repo_root
+from coursekit.grading.exercises import exercise_dir, repo_root
 
 
 def test_default_env_and_explicit_folder(monkeypatch, tmp_path):

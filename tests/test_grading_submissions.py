@@ -11,10 +11,9 @@ import zipfile
 import pytest
 
 from coursekit.cli import main
+from coursekit.grading.exercises import get_exercise, repo_root
 from coursekit.grading.grade import discover, extract_zip, student_id
-from coursekit.grading.paths import repo_root
-from coursekit.grading.registry import get_exercise
-from coursekit.grading.runner import MAX_MODULE_BYTES
+from coursekit.grading.trusted import MAX_MODULE_BYTES
 
 
 @pytest.mark.parametrize("name, expected", [

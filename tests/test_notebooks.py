@@ -162,8 +162,8 @@ def _uses_exercises(path: Path) -> bool:
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=_ids(NOTEBOOKS))
 def test_notebook_runs(path, mode, monkeypatch):
     from coursekit.grading import EXERCISES
-    from coursekit.grading.fallback import BANNER_PREFIX
-    from coursekit.grading.registry import exercise_number
+    from coursekit.grading.exercises import exercise_number
+    from coursekit.grading.notebook import BANNER_PREFIX
 
     if mode == "exercises" and not _uses_exercises(path):
         pytest.skip("no exercise in this chapter: the solutions pass runs the very same code")

@@ -26,7 +26,7 @@ import pytest
 from test_bad_input_cli import originals  # noqa: F401  (module fixture: a real dataset and checkpoint)
 
 from coursekit.cli import main
-from coursekit.grading.paths import repo_root
+from coursekit.grading.exercises import repo_root
 
 pytestmark = [pytest.mark.usefixtures("one_torch_thread"), pytest.mark.timeout(300)]
 

@@ -19,7 +19,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from coursekit.grading.check import check
+    from coursekit.grading.notebook import check
 
     result = check(args.exercise, args.dir, timeout=args.timeout)
     return 0 if result.all_passed else 1

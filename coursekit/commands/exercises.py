@@ -52,8 +52,7 @@ def _claim_folders(root: Path, stack: contextlib.ExitStack) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from coursekit.grading.build import build_exercises
-    from coursekit.grading.paths import repo_root
-    from coursekit.grading.registry import EXERCISES, exercise_number
+    from coursekit.grading.exercises import EXERCISES, exercise_number, repo_root
 
     if args.action == "list":
         for e in EXERCISES:

@@ -43,7 +43,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from coursekit.grading.runner import Limits
+    from coursekit.grading.sandbox import Limits
 
     limits = Limits(timeout_s=args.timeout, test_timeout_s=args.test_timeout, memory_mb=args.memory_mb,
                     disk_mb=args.disk_mb)

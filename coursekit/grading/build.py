@@ -21,8 +21,7 @@ import importlib.util
 from dataclasses import dataclass
 from pathlib import Path
 
-from coursekit.grading.paths import repo_root
-from coursekit.grading.registry import EXERCISES, Exercise, exercise_number
+from coursekit.grading.exercises import EXERCISES, Exercise, exercise_number, repo_root
 
 BEGIN = "# BEGIN SOLUTION"
 END = "# END SOLUTION"
@@ -39,7 +38,7 @@ class _Source:
 
 def _read_source(module: str) -> _Source:
     # Located, not imported: find_spec("coursekit.nn.kl") would run coursekit/nn/__init__.py (torch),
-    # and a grading worker's start (coursekit.grading.remote) reads its exercise's source this way.
+    # and a grading worker's start (coursekit.grading.sandbox) reads its exercise's source this way.
     spec = importlib.util.find_spec(module.split(".")[0])
     for depth in range(2, module.count(".") + 2):
         if spec is None or not spec.submodule_search_locations:

@@ -9,7 +9,7 @@ becomes one ``_``, leading/trailing ``.``/``_`` are dropped (empty: "student"), 
 ``_2``, ``_3``, ... in sorted order; the ``folder`` column of grades.csv maps each id back to the
 submission's own name. Entries whose name starts with ``.`` are not graded: the summary's
 warnings name them. For every student one trusted test
-process runs the graded tests (:func:`coursekit.grading.runner.run_tests`), each exercise's
+process runs the graded tests (:func:`coursekit.grading.trusted.run_tests`), each exercise's
 student code in its own sandboxed worker; the test files are read once at the start.
 
 Written to ``--out`` (each file atomically, as soon as it is complete; contents deterministic:
@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import csv
 import hashlib
+import importlib.util
 import io
 import json
 import os
@@ -36,11 +37,13 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from coursekit.grading.paths import repo_root
-from coursekit.grading.registry import EXERCISES, Exercise, get_exercise
-from coursekit.grading.runner import MAX_MODULE_BYTES, Limits, RunResult, read_test_sources, run_tests
-from coursekit.grading.scoring import TestScore, exercise_status, score_exercise
 from coursekit.atomic import atomic_write_text
+from coursekit.grading import bubblewrap
+from coursekit.grading.exercises import EXERCISES, Exercise, get_exercise, read_test_sources, repo_root
+from coursekit.grading.report import (HiddenTests, TestOutcome, exercise_status, feedback_markdown, gradescope_json,
+                                      load_hidden_tests, score_exercise)
+from coursekit.grading.sandbox import Limits
+from coursekit.grading.trusted import MAX_MODULE_BYTES, RunResult, run_tests
 
 _SAFE = re.compile(r"[^A-Za-z0-9._-]+")
 # Latin letters that Unicode does not decompose into a base letter and an accent
@@ -53,7 +56,8 @@ class ExerciseGrade:
     """One student's result on one exercise."""
 
     exercise: Exercise
-    scores: list[TestScore]
+    scores: list[TestOutcome]
+    """One scored record per graded (and hidden) test."""
     status: str
     """"ok", "missing", "too_large" (the module is over MAX_MODULE_BYTES), "timeout", "memory", "crashed",
     "output", "reference", "protocol" or "error"."""
@@ -192,30 +196,41 @@ def _too_large(folder: Path, exercise: Exercise, oversized: dict[str, int]) -> s
             "module: not graded")
 
 
-def _grade_student(exercises: list[Exercise], folder: Path, limits: Limits, sources: dict[str, bytes],
-                   hidden: tuple[dict[str, bytes], dict], mode: str, tag: str,
-                   oversized: dict[str, int]) -> list[ExerciseGrade]:
+@dataclass(frozen=True)
+class _Setup:
+    """What every submission's run shares, read once at the start."""
+
+    exercises: list[Exercise]
+    sources: dict[str, bytes]
+    """The graded test files (:func:`coursekit.grading.exercises.read_test_sources`)."""
+    hidden: HiddenTests
+    limits: Limits
+    mode: str
+    tag: str
+
+
+def _grade_student(setup: _Setup, folder: Path, oversized: dict[str, int]) -> list[ExerciseGrade]:
     """All exercises of one submission: one trusted test run, one sandboxed worker per exercise."""
-    too_large = {e.id: _too_large(folder, e, oversized) for e in exercises}
-    present = [e for e in exercises if (folder / f"{e.id}.py").is_file() and not too_large[e.id]]
-    run = run_tests(present, folder, limits, sources, hidden[0], mode=mode, tag=tag) if present else RunResult()
+    too_large = {e.id: _too_large(folder, e, oversized) for e in setup.exercises}
+    present = [e for e in setup.exercises if (folder / f"{e.id}.py").is_file() and not too_large[e.id]]
+    run = run_tests(present, folder, setup.limits, setup.sources, setup.hidden, mode=setup.mode,
+                    tag=setup.tag) if present else RunResult()
     grades = []
-    for exercise in exercises:
-        points = hidden[1].get(exercise.id, {})
+    for exercise in setup.exercises:
+        points = setup.hidden.points.get(exercise.id, {})
         if exercise not in present:
             status = "too_large" if too_large[exercise.id] else "missing"
             reason = too_large[exercise.id] or f"{exercise.id}.py was not found in the submission"
-            skipped = RunResult(status=status, reason=reason)
-            grades.append(ExerciseGrade(exercise, score_exercise(exercise, skipped, points), status, reason))
+            grades.append(ExerciseGrade(exercise, score_exercise(exercise, [], reason, points), status, reason))
             continue
         mine = [o for o in run.outcomes if o.file == f"test_{exercise.id}.py" or o.file in points]
-        status = run.status if run.status != "ok" and not mine else exercise_status(exercise, mine)
+        status = run.status if run.status != "ok" and not mine else exercise_status(mine)
         reason = run.reason if status == run.status and run.status != "ok" else _reason(status, mine)
-        grades.append(ExerciseGrade(exercise, score_exercise(exercise, run, points), status, reason))
+        grades.append(ExerciseGrade(exercise, score_exercise(exercise, run.outcomes, run.reason, points), status, reason))
     return grades
 
 
-def _reason(status: str, outcomes) -> str:
+def _reason(status: str, outcomes: list[TestOutcome]) -> str:
     if status == "ok":
         return ""
     first = next((o for o in outcomes if o.cause == status), None)
@@ -224,8 +239,6 @@ def _reason(status: str, outcomes) -> str:
 
 def _fingerprint(root: Path, exercises: list[Exercise]) -> dict[str, str]:
     """Hashes of the files grading trusts: graded tests, conftest and the reference modules."""
-    import importlib.util
-
     paths = [root / "tests" / "exercises" / "conftest.py"] + [root / e.test_module for e in exercises]
     for e in exercises:
         spec = importlib.util.find_spec(e.source)
@@ -234,68 +247,65 @@ def _fingerprint(root: Path, exercises: list[Exercise]) -> dict[str, str]:
     return {str(p): hashlib.sha256(p.read_bytes()).hexdigest() if p.is_file() else "missing" for p in paths}
 
 
+def _unpack(entries: list[tuple[str, Path]], unpack: Path, exercises: list[Exercise],
+            students: dict[str, StudentGrade]) -> list[tuple[str, Path, dict[str, int]]]:
+    """(student id, folder holding the modules, oversized zip members) per submission; a zip is
+    extracted under ``unpack``, one that cannot be read is the student's ``problem``."""
+    tasks = []
+    for sid, path in entries:
+        oversized: dict[str, int] = {}
+        if path.is_file():
+            folder = unpack / sid
+            folder.mkdir()
+            try:
+                oversized = extract_zip(path, folder, exercises)
+            except (zipfile.BadZipFile, OSError, ValueError, NotImplementedError) as exc:
+                students[sid].problem = f"could not read {path.name}: {type(exc).__name__}: {exc}"
+        else:
+            folder = _module_folder(path, exercises)
+        tasks.append((sid, folder, oversized))
+    return tasks
+
+
 def grade_submissions(submissions: str | Path, out: str | Path, exercises: list[str] | None = None,
                       jobs: int = 1, limits: Limits | None = None, progress: bool = True,
                       hidden_tests: str | Path | None = None) -> GradeSummary:
     """Grade every submission in ``submissions`` and write the results under ``out``.
 
-    ``hidden_tests``: a folder of instructor-only tests (:mod:`coursekit.grading.hidden`).
+    ``hidden_tests``: a folder of instructor-only tests (:func:`coursekit.grading.report.load_hidden_tests`).
     Prints one line when student code cannot be isolated here (no working bubblewrap).
     """
-    from coursekit.grading import sandbox
-    from coursekit.grading.hidden import load_hidden_tests
-
     if int(jobs) < 1:
         raise ValueError(f"jobs must be at least 1, got {jobs!r}")
     start = time.monotonic()
-    limits = limits or Limits()
     chosen = [get_exercise(e) for e in exercises] if exercises else list(EXERCISES)
     submissions, out = Path(submissions), Path(out)
     entries, dot_entries = discover(submissions, out)
-    hidden = load_hidden_tests(hidden_tests) if hidden_tests is not None else ({}, {})
+    hidden = load_hidden_tests(hidden_tests) if hidden_tests is not None else HiddenTests()
     root = repo_root()
-    sources = read_test_sources(chosen, root)
-    mode = sandbox.mode()
-    if mode != "bwrap":
-        print(sandbox.NOT_ISOLATED, flush=True)
-    tag = f"coursekit-grade-{os.getpid()}-{time.monotonic_ns()}"
+    setup = _Setup(chosen, read_test_sources(chosen, root), hidden, limits or Limits(), bubblewrap.mode(),
+                   f"coursekit-grade-{os.getpid()}-{time.monotonic_ns()}")
+    if setup.mode != "bwrap":
+        print(bubblewrap.NOT_ISOLATED, flush=True)
     before = _fingerprint(root, chosen)
     students = {sid: StudentGrade(sid, path.name) for sid, path in entries}
-    oversized: dict[str, dict[str, int]] = {sid: {} for sid, _ in entries}
+    from tqdm.auto import tqdm  # here: it looks for a notebook, which takes time
 
     with tempfile.TemporaryDirectory(prefix="coursekit-submissions-") as unpack:
-        tasks = []
-        for sid, path in entries:
-            folder = path
-            if path.is_file():
-                folder = Path(unpack) / sid
-                folder.mkdir()
-                try:
-                    oversized[sid] = extract_zip(path, folder, chosen)
-                except (zipfile.BadZipFile, OSError, ValueError, NotImplementedError) as exc:
-                    students[sid].problem = f"could not read {path.name}: {type(exc).__name__}: {exc}"
-            else:
-                folder = _module_folder(path, chosen)
-            tasks.append((sid, folder))
-
-        from tqdm.auto import tqdm
-
+        tasks = _unpack(entries, Path(unpack), chosen, students)
         with ThreadPoolExecutor(max_workers=int(jobs)) as pool:
-            futures = [pool.submit(_grade_student, chosen, folder, limits, sources, hidden, mode, tag, oversized[sid])
-                       for sid, folder in tasks]
-            for (sid, _), future in tqdm(zip(tasks, futures), total=len(tasks), desc="grading", disable=not progress):
+            futures = [pool.submit(_grade_student, setup, folder, oversized) for _, folder, oversized in tasks]
+            for (sid, _, _), future in tqdm(zip(tasks, futures), total=len(tasks), desc="grading", disable=not progress):
                 students[sid].grades = future.result()
                 write_student(out, students[sid])  # a finished student is saved at once
 
-    summary = GradeSummary(list(students.values()), chosen, out, time.monotonic() - start, mode=mode, tag=tag)
+    summary = GradeSummary(list(students.values()), chosen, out, time.monotonic() - start, mode=setup.mode, tag=setup.tag)
     if dot_entries:
         summary.warnings.append(f"not graded (the name starts with '.'): {', '.join(dot_entries)}; rename a "
                                 "student's submission to grade it")
     after = _fingerprint(root, chosen)
-    for path, digest in before.items():
-        if after.get(path) != digest:
-            summary.warnings.append(f"{path} changed while grading (a submission wrote to it?): restore it "
-                                    "from git; this run used the copy read at the start")
+    summary.warnings += [f"{path} changed while grading (a submission wrote to it?): restore it from git; this run "
+                         "used the copy read at the start" for path, digest in before.items() if after.get(path) != digest]
     atomic_write_text(out / "grades.csv", class_csv(summary))
     return summary
 
@@ -316,7 +326,5 @@ def class_csv(summary: GradeSummary) -> str:
 
 def write_student(out: Path, student: StudentGrade) -> None:
     """<student>/results.json and <student>/feedback.md, each written atomically."""
-    from coursekit.grading.feedback import feedback_markdown, gradescope_json
-
     atomic_write_text(out / student.student / "results.json", json.dumps(gradescope_json(student), indent=2) + "\n")
     atomic_write_text(out / student.student / "feedback.md", feedback_markdown(student))

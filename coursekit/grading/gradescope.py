@@ -26,10 +26,10 @@ import tempfile
 import zipfile
 from pathlib import Path
 
-from coursekit.grading.paths import repo_root
-from coursekit.grading.registry import EXERCISES, get_exercise
-from coursekit.grading.runner import Limits
 from coursekit.atomic import atomic_path, atomic_write_text
+from coursekit.grading.exercises import EXERCISES, get_exercise, repo_root
+from coursekit.grading.report import load_hidden_tests
+from coursekit.grading.sandbox import Limits
 
 SETUP = """#!/usr/bin/env bash
 # Gradescope image build (Ubuntu, root): bubblewrap, Python >= 3.11 and the pinned environment.
@@ -81,15 +81,13 @@ def write_autograder(zip_path: str | Path, exercises: list[str] | None = None, h
     The zip is built in a temporary with a random name recorded in ``zip_path``'s lock (``lock``,
     the caller's :class:`coursekit.output_lock.OutputLock`, or one taken here), then renamed into place.
     """
-    from coursekit.grading.hidden import load_hidden_tests
-
     zip_path = Path(zip_path)
     if os.path.lexists(zip_path):
         raise ValueError(f"{zip_path} already exists: choose a new name (nothing was written)")
     if not zip_path.parent.is_dir():
         raise FileNotFoundError(f"folder {str(zip_path.parent)!r} does not exist")
     chosen = [get_exercise(e) for e in exercises] if exercises else list(EXERCISES)
-    hidden = load_hidden_tests(hidden_tests)[0] if hidden_tests is not None else {}
+    hidden = load_hidden_tests(hidden_tests).sources if hidden_tests is not None else {}
     limits = limits or Limits()
     root = repo_root()
     config = {"exercises": [e.id for e in chosen],

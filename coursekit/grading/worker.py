@@ -1,14 +1,15 @@
 """The untrusted side: a process that imports ONE student module and runs calls on request.
 
-Started by :mod:`coursekit.grading.remote` (inside bubblewrap where available, see
-:mod:`coursekit.grading.sandbox`) as ``python -I -c ...`` with fd 0 = requests, a reply fd named in the first message
-and fd 1/2 = a pipe the trusted side drains (what the student's code prints). Nothing decided
-here is trusted: this process only computes values and sends them back as plain data
-(:mod:`coursekit.grading.protocol`); every comparison happens in the trusted pytest process.
+Started by :class:`coursekit.grading.sandbox.Sandbox` (inside bubblewrap where available, see
+:mod:`coursekit.grading.bubblewrap`) as ``python -I -c ...`` with fd 0 = requests, a reply fd named
+in the first message and fd 1/2 = a pipe the trusted side drains (what the student's code prints).
+Nothing decided here is trusted: this process only computes values and sends them back as plain
+data (:mod:`coursekit.grading.codec`); every comparison happens in the trusted pytest process.
 
 Before the student's module is imported the worker applies its resource limits and replaces
 the library's own implementation of the graded exercise (and any import of ``solutions``) by
 something that raises :class:`ReferenceCalled`, so a submission cannot hand in the reference.
+:func:`scale_model` is a stand-in network the graded tests build here (``sandbox.new``).
 """
 
 from __future__ import annotations
@@ -19,14 +20,18 @@ import sys
 import traceback
 from typing import Any
 
+from coursekit.grading import codec
+from coursekit.grading.exercises import load_exercise
+
 REQUEST_FD = 0
-_FDS = {"reply": 3}  # set from the settings message
 
 
 class ReferenceCalled(PermissionError):
     """The submission called the library's reference implementation (or imported solutions/)."""
 
 
+# The one piece of state outside the Worker: blanked library files (build.blank_reference) call
+# reference_called() by module name, without a handle on the worker.
 _STATE = {"reference_called": ""}
 
 
@@ -90,8 +95,29 @@ def _block_reference(source: str, objects: list[str], solutions_dir: str) -> Non
     sys.addaudithook(hook)  # cannot be removed from Python code
 
 
+def scale_model(w: float):
+    """A stand-in network (x_t, t, cond) -> w * x_t (noise or velocity prediction) with one scalar
+    parameter ``w``, for tests whose gradients must flow through the student's code into parameters:
+    ``sandbox.new("coursekit.grading.worker:scale_model", 0.3)`` builds it here (torch is imported then)."""
+    import torch
+    from torch import nn
+
+    class Scale(nn.Module):
+        def __init__(self) -> None:
+            super().__init__()
+            self.w = nn.Parameter(torch.tensor(float(w)))
+
+        def forward(self, x: torch.Tensor, t=None, cond=None) -> torch.Tensor:
+            return self.w * x
+
+    return Scale()
+
+
 class Worker:
-    def __init__(self) -> None:
+    """Holds the student's module and the objects handed out as handles; answers requests."""
+
+    def __init__(self, reply_fd: int) -> None:
+        self.reply_fd = reply_fd
         self.objects: dict[int, Any] = {}
         self.module: Any = None
 
@@ -103,21 +129,17 @@ class Worker:
         return {"t": "obj", "id": key, "type": f"{getattr(kind, '__module__', '?')}.{getattr(kind, '__qualname__', '?')}"}
 
     def send(self, message: dict) -> None:
-        from coursekit.grading import protocol
-
         try:
-            frame = protocol.encode(message, obj_ref=self._ref, mark_grad=False)
+            frame = codec.encode(message, obj_ref=self._ref, mark_grad=False)
         except Exception as exc:  # noqa: BLE001 - e.g. an unsupported dtype: tell the trusted side
-            frame = protocol.encode({"kind": "error", "type": type(exc).__name__, "message": str(exc),
-                                     "traceback": "", "reference": ""})
-        protocol.write_frame(_FDS["reply"], frame)
+            frame = codec.encode({"kind": "error", "type": type(exc).__name__, "message": str(exc),
+                                  "traceback": "", "reference": ""})
+        codec.write_frame(self.reply_fd, frame)
 
     def receive(self) -> dict:
-        from coursekit.grading import protocol
-
-        payload = protocol.read_frame_blocking(REQUEST_FD)
-        return protocol.decode(payload, obj=lambda v: self.objects[v["id"]], cb=self._callback,
-                               attr=lambda v: getattr(self.module, v["name"]), generators=True)
+        payload = codec.read_frame_blocking(REQUEST_FD)
+        return codec.decode(payload, obj=lambda v: self.objects[v["id"]], cb=self._callback,
+                            attr=lambda v: getattr(self.module, v["name"]), generators=True)
 
     def _callback(self, spec: dict):
         def call_trusted(*args, **kwargs):
@@ -234,14 +256,11 @@ class Worker:
 
 
 def main() -> int:
-    from coursekit.grading import protocol
-
-    payload = protocol.read_frame_blocking(REQUEST_FD)
-    settings = protocol.decode(payload)
-    _FDS["reply"] = int(settings["reply_fd"])
+    """The worker process: settings, limits, the reference blocked, the student's module, then requests."""
+    settings = codec.decode(codec.read_frame_blocking(REQUEST_FD))
     _apply_limits(settings)
     sys.dont_write_bytecode = True
-    worker = Worker()
+    worker = Worker(int(settings["reply_fd"]))
     try:
         _block_reference(settings["source"], settings["objects"], settings.get("solutions_dir", ""))
     except BaseException as exc:  # noqa: BLE001 - the library itself failed to import: report it
@@ -249,8 +268,6 @@ def main() -> int:
         return 1
     worker.send({"kind": "booted", "error": ""})  # from here on the student's code runs
     try:
-        from coursekit.grading.loader import load_exercise
-
         worker.module = load_exercise(settings["exercise"], settings["folder"])
     except BaseException as exc:  # noqa: BLE001 - a broken module fails every test with this reason
         if isinstance(exc, KeyboardInterrupt):
@@ -260,6 +277,6 @@ def main() -> int:
         worker.send({"kind": "ready"})
     try:
         worker.serve()
-    except (EOFError, OSError, protocol.ProtocolError):  # the trusted side is gone or closed the channel
+    except (EOFError, OSError, codec.ProtocolError):  # the trusted side is gone or closed the channel
         return 0
     return 0

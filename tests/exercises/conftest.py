@@ -30,8 +30,9 @@ from pathlib import Path
 
 import pytest
 
-from coursekit.grading.harness import grading_settings
-from coursekit.grading.remote import RemoteModule, Sandbox
+from coursekit.grading.exercises import exercise_dir, repo_root
+from coursekit.grading.sandbox import Limits, RemoteModule, Sandbox
+from coursekit.grading.trusted import grading_settings
 
 if not os.environ.get("COURSEKIT_EXERCISES"):
     collect_ignore_glob = ["test_*.py"]
@@ -43,13 +44,11 @@ EARLY = pytest.StashKey[dict]()
 def new_sandbox(config, exercise_id: str, scratch) -> Sandbox:
     """The worker of one exercise, with the grading run's limits (defaults outside the grader)."""
     settings = grading_settings(config) or {}
-    from coursekit.grading.paths import exercise_dir, repo_root
-
     folder = settings.get("submission") or str(exercise_dir())
-    return Sandbox(exercise_id, folder, scratch,
-                   test_timeout=float(settings.get("test_timeout", 60)), budget=float(settings.get("budget", 600)),
-                   memory_mb=int(settings.get("memory_mb", 2048)), output_mb=int(settings.get("file_mb", 32)),
-                   disk_mb=int(settings.get("disk_mb", 64)), mode=settings.get("mode"),
+    limits = Limits(timeout_s=float(settings.get("budget", 600)), test_timeout_s=float(settings.get("test_timeout", 60)),
+                    memory_mb=int(settings.get("memory_mb", 2048)), output_mb=int(settings.get("file_mb", 32)),
+                    disk_mb=int(settings.get("disk_mb", 64)))
+    return Sandbox(exercise_id, folder, scratch, limits, mode=settings.get("mode"),
                    solutions_dir=settings.get("solutions_dir") or str(repo_root() / "solutions"),
                    tag=settings.get("tag", ""), reap=bool(settings))
 
@@ -74,7 +73,7 @@ class EarlyWorker:
         # Wait (sleeping) until the worker process exists: this thread goes on to import the test
         # modules, and torch's import holds the GIL for long stretches that would delay the launch.
         deadline = time.monotonic() + 5.0
-        while self.box is not None and self.box.proc is None and not self.started.is_set() \
+        while self.box is not None and self.box.worker is None and not self.started.is_set() \
                 and time.monotonic() < deadline:
             time.sleep(0.005)
 

@@ -92,7 +92,7 @@ def test_loss_matches_closed_form(student):
 
 def test_loss_backpropagates(student, sandbox):
     a0, e, t = _inputs(7, shape=(3, 5))
-    model = sandbox.new("coursekit.grading.probes:Scale", 0.3)  # v = w * x_t, w a parameter (in the worker)
+    model = sandbox.new("coursekit.grading.worker:scale_model", 0.3)  # v = w * x_t, w a parameter (in the worker)
     loss, (grads,) = sandbox.grad(student.flow_matching_loss, model, a0, None, t, e, wrt=(model,))
     assert grads["w"] is not None and torch.isfinite(grads["w"]), \
         "no gradient reached the model's parameter: keep the loss a torch expression"

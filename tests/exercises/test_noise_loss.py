@@ -102,7 +102,7 @@ def test_epsilon_loss_is_mse_on_noise(student):
 def test_epsilon_loss_uses_q_sample_fn_and_backpropagates(student, sandbox):
     x0, noise, t = _inputs(7)
     fake_x_t = torch.full_like(x0, 2.0)
-    model = sandbox.new("coursekit.grading.probes:Scale", 0.3)  # eps = w * x_t, w a parameter (in the worker)
+    model = sandbox.new("coursekit.grading.worker:scale_model", 0.3)  # eps = w * x_t, w a parameter (in the worker)
     loss, (grads,) = sandbox.grad(student.epsilon_loss, model, x0, None, t, noise, ABAR.clone(),
                                   q_sample_fn=lambda *args: fake_x_t, wrt=(model,))
     torch.testing.assert_close(loss.detach(), ((0.6 - noise) ** 2).mean(), rtol=1e-5, atol=1e-7,

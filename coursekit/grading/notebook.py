@@ -1,4 +1,5 @@
-"""``exercise_or_reference``: the student's code where it is written, the library's where it is not.
+"""What a notebook calls: ``exercise_or_reference`` (the student's code where it is written, the
+library's where it is not) and ``coursekit.check`` (instant feedback on one exercise).
 
 Every chapter with an exercise behaves the same way when the exercise is unfinished: one cell
 loads it with
@@ -27,6 +28,20 @@ New chapters (10, 11, ...) follow the same pattern: one ``exercise_or_reference`
 exercise cell, then pass ``ex.<object>`` explicitly into the library (no monkeypatching), and
 ``coursekit.check("<id>")`` further down. ``tests/test_notebooks.py`` runs every notebook
 against the untouched stubs and requires the banner in every chapter that has an exercise.
+
+``coursekit.check("<id>")`` (``coursekit check <id>`` in a terminal) runs the exercise's graded
+tests (never the instructor's hidden ones) in a trusted process that calls the student's module
+in a sandboxed worker: the same path as the instructor's grader (:mod:`coursekit.grading.trusted`),
+so what passes here passes there. Prints::
+
+    Exercise 1.1 (chunk_windows): Diffusion Policy training windows with edge padding
+    module: exercises/chunk_windows.py
+      test                                    points  result
+      test_shapes_and_dtypes                   0 / 1   FAIL
+          hint: Return (indices, episode): int64 arrays of shape (W, Tp) and (W,).
+          got:  NotImplementedError: Exercise 1.1 (chunk_windows): implement ...
+      ...
+    score 0 / 10  (0.9 s)
 """
 
 from __future__ import annotations
@@ -39,8 +54,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from coursekit.grading.loader import load_exercise
-from coursekit.grading.registry import Exercise, exercise_number, get_exercise
+from coursekit.grading.exercises import Exercise, exercise_dir, exercise_number, get_exercise, load_exercise
+from coursekit.grading.report import TestOutcome, score_exercise
+from coursekit.grading.sandbox import Limits
+from coursekit.grading.trusted import RunResult, run_tests
 
 BANNER_PREFIX = "not implemented yet"
 """Phrase every fallback banner contains (tests look for it in executed notebooks)."""
@@ -189,3 +206,68 @@ def exercise_or_reference(exercise_id: str, directory: str | os.PathLike | None 
     if show:
         _show(parts)
     return parts
+
+
+# ---------------------------------------------------------------------------- check
+@dataclass
+class CheckResult:
+    """Scores of one check; ``print(result.table())`` shows them again."""
+
+    exercise: Exercise
+    module: Path
+    """The student's module that was checked."""
+    scores: list[TestOutcome]
+    """One scored record per graded test."""
+    run: RunResult
+
+    @property
+    def points(self) -> float:
+        return sum(s.points for s in self.scores)
+
+    @property
+    def max_points(self) -> float:
+        return sum(s.max_points for s in self.scores)
+
+    @property
+    def all_passed(self) -> bool:
+        return all(s.passed for s in self.scores)
+
+    def table(self) -> str:
+        e = self.exercise
+        width = max(len(s.name) for s in self.scores) + 2
+        lines = [f"Exercise {exercise_number(e)} ({e.id}): {e.title}", f"module: {self.module}"]
+        if self.run.status != "ok":
+            lines.append(f"!! {self.run.reason}")
+        lines.append(f"  {'test':<{width}}{'points':>9}  result")
+        for s in self.scores:
+            mark = "pass" if s.passed else "FAIL"
+            lines.append(f"  {s.name:<{width}}{s.points:>4g} / {s.max_points:<3g} {mark}")
+            if not s.passed:
+                lines.append(f"      hint: {s.hint}")
+                if s.message:
+                    lines.append(f"      got:  {s.message}")
+        lines.append(f"score {self.points:g} / {self.max_points:g}  ({self.run.seconds:.1f} s)")
+        return "\n".join(lines)
+
+    def __repr__(self) -> str:
+        return f"CheckResult({self.exercise.id}: {self.points:g} / {self.max_points:g})"
+
+
+def check(exercise_id: str, directory: str | os.PathLike | None = None, *, timeout: float = 120.0,
+          show: bool = True) -> CheckResult:
+    """Run the graded tests of ``exercise_id`` on the student's module and print a table.
+
+    ``directory`` defaults to the folder :func:`coursekit.grading.exercises.load_exercise` uses
+    (exercises/, or solutions/ with COURSEKIT_EXERCISES=solutions). Save the file (or the
+    notebook's %%writefile cell) first: the test subprocess reads the module from disk.
+    """
+    exercise = get_exercise(exercise_id)
+    folder = exercise_dir(directory)
+    module = folder / f"{exercise.id}.py"
+    if not module.is_file():
+        raise FileNotFoundError(f"{module} not found: expected your module for exercise {exercise.id!r} there")
+    run = run_tests([exercise], folder, Limits(timeout_s=timeout))
+    result = CheckResult(exercise, module, score_exercise(exercise, run.outcomes, run.reason), run)
+    if show:
+        print(result.table())
+    return result

@@ -1,4 +1,5 @@
-"""The exercise registry: every graded piece of the course, in one table.
+"""The course's exercises: the registry (every graded piece, in one table), where their files are,
+and loading a student's module for one.
 
 An exercise is code written ONCE in the library, inside a module-level function or class,
 between ``# BEGIN SOLUTION`` and ``# END SOLUTION`` lines. ``coursekit exercises build`` turns
@@ -26,10 +27,19 @@ How a graded test file is written (the student's code never runs in the test's p
 
 from __future__ import annotations
 
+import importlib.util
+import os
 import re
+import sys
 from dataclasses import dataclass, field
+from pathlib import Path
+from types import ModuleType
 
 _ID = re.compile(r"^[a-z][a-z0-9_]*$")
+ROOT_ENV = "COURSEKIT_ROOT"
+"""Environment variable naming the repository root (optional; found automatically otherwise)."""
+FOLDER_ENV = "COURSEKIT_EXERCISES"
+"""Environment variable choosing the implementation: "exercises" (default), "solutions" or a path."""
 
 
 @dataclass(frozen=True)
@@ -251,3 +261,84 @@ def _check_unique() -> None:
 
 
 _check_unique()
+
+
+# ------------------------------------------------------------------------------ the course on disk
+def _looks_like_root(path: Path) -> bool:
+    return (path / "coursekit" / "grading").is_dir() and (path / "pyproject.toml").is_file()
+
+
+def repo_root() -> Path:
+    """The course repository: $COURSEKIT_ROOT, else the checkout holding this package, else cwd or a parent."""
+    env = os.environ.get(ROOT_ENV)
+    if env:
+        root = Path(env).expanduser().resolve()
+        if not _looks_like_root(root):
+            raise FileNotFoundError(f"{ROOT_ENV}={env!r} is not a coursekit checkout (no pyproject.toml and coursekit/grading/)")
+        return root
+    package_parent = Path(__file__).resolve().parents[2]  # coursekit/grading/exercises.py -> repo
+    candidates = [package_parent, Path.cwd(), *Path.cwd().parents]
+    for candidate in candidates:
+        if _looks_like_root(candidate):
+            return candidate
+    raise FileNotFoundError(
+        "could not find the coursekit repository (a folder with pyproject.toml and coursekit/grading/); "
+        f"set {ROOT_ENV}=/path/to/the/clone"
+    )
+
+
+def exercise_dir(directory: str | os.PathLike | None = None) -> Path:
+    """The folder holding the student's modules.
+
+    ``directory`` if given; else $COURSEKIT_EXERCISES: "exercises" (or unset) -> <root>/exercises,
+    "solutions" -> <root>/solutions, anything else is taken as a path.
+    """
+    if directory is None:
+        choice = os.environ.get(FOLDER_ENV, "").strip() or "exercises"
+        directory = repo_root() / choice if choice in ("exercises", "solutions") else Path(choice)
+    path = Path(directory).expanduser()
+    if not path.is_dir():
+        raise FileNotFoundError(f"exercise folder {str(path)!r} does not exist (run `coursekit exercises build`?)")
+    return path.resolve()
+
+
+def read_test_sources(exercises: list[Exercise], root: Path | None = None) -> dict[str, bytes]:
+    """The graded test files (and their conftest) as bytes, read once at the start of a grading run."""
+    root = Path(root) if root is not None else repo_root()
+    folder = root / "tests" / "exercises"
+    sources = {"conftest.py": (folder / "conftest.py").read_bytes()}
+    for exercise in exercises:
+        path = root / exercise.test_module
+        if not path.is_file():
+            raise FileNotFoundError(f"graded tests of exercise {exercise.id!r} not found at {path}")
+        sources[path.name] = path.read_bytes()
+    return sources
+
+
+def load_exercise(exercise_id: str, directory: str | os.PathLike | None = None) -> ModuleType:
+    """Import ``<folder>/<exercise_id>.py`` afresh and return it.
+
+    The folder is ``directory`` if given, else chosen by $COURSEKIT_EXERCISES ("exercises",
+    the default, "solutions", or a path; see :func:`exercise_dir`).
+    Every call re-executes the file, so edits show up without restarting the notebook kernel.
+    Notebooks pass the functions/classes of the returned module explicitly into the library.
+    """
+    exercise = get_exercise(exercise_id)
+    folder = exercise_dir(directory)
+    path = folder / f"{exercise.id}.py"
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} not found: expected the module for exercise {exercise.id!r} there")
+    # a readable, folder-specific name: tracebacks say e.g. "exercises_chunk_windows"
+    tag = "".join(c if c.isalnum() else "_" for c in folder.name) or "student"
+    name = f"{tag}_{exercise.id}"
+    spec = importlib.util.spec_from_file_location(name, path)
+    if spec is None or spec.loader is None:
+        raise FileNotFoundError(f"cannot import {path}")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module  # dataclasses and pickling look classes up by module name
+    try:
+        spec.loader.exec_module(module)
+    except BaseException:
+        sys.modules.pop(name, None)
+        raise
+    return module
