@@ -60,14 +60,18 @@ sandbox:
 	  else echo "WARNING: bwrap missing and not root; grading will run without OS isolation"; fi; \
 	fi
 
+## Test workers (pytest-xdist): two, one per core of the course's reference laptop; JOBS=1 runs serially.
+JOBS ?= 2
+XDIST := $(if $(filter 1,$(JOBS)),,-n $(JOBS) --dist loadgroup)
+
 ## The whole suite: library, exercises (both implementations), grader, notebooks, browser.
 test: setup browser sandbox
-	COURSEKIT_FAST=1 COURSEKIT_EXERCISES=solutions $(PY) -m pytest -q --durations=15
+	COURSEKIT_FAST=1 COURSEKIT_EXERCISES=solutions $(PY) -m pytest -q $(XDIST) --durations=25
 
 ## Everything but notebooks, real-browser and slow tests (slow: over ~20 s on 2 cores, e.g. the
 ## shipped-checkpoint reproductions).
 test-fast: setup
-	COURSEKIT_FAST=1 $(PY) -m pytest -q -m "not slow and not notebook and not browser"
+	COURSEKIT_FAST=1 $(PY) -m pytest -q $(XDIST) -m "not slow and not notebook and not browser"
 
 ## Regenerate exercises/ and solutions/ from the marked library code.
 exercises: setup

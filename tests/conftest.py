@@ -65,3 +65,26 @@ def train_then_eval():
     """`coursekit train` (tiny, a few steps) into ``folder/run``, then `coursekit eval` on a short episode:
     returns (the checkpoint's config.json, the eval summary)."""
     return _train_then_eval
+
+
+# `make test` runs the suite on two workers (pytest-xdist, ``--dist loadgroup``). A module whose
+# tests share a costly module-scoped fixture (a JupyterLab server, the graded attack corpus, a
+# trained tiny policy) stays on one worker, so that the fixture is built once; the notebook runs
+# and the shipped-checkpoint reproductions, each independent and long, spread over both. The
+# longest modules go first, so that no worker is left with a long one at the end.
+SPREAD = {"test_notebooks.py", "test_shipped_checkpoints.py"}
+"""Modules whose tests are scheduled one by one (no shared fixture worth keeping together)."""
+LONGEST_FIRST = ("test_notebooks.py", "test_shipped_checkpoints.py", "test_browser_lab.py", "test_grading_attacks.py",
+                 "test_kill.py", "test_grading_exercises.py", "test_grading_corpus.py")
+"""Modules started first (about their order of cost in ``make test``); the rest follow in file order."""
+
+
+def pytest_collection_modifyitems(config, items):
+    def rank(item) -> int:
+        name = item.path.name
+        return LONGEST_FIRST.index(name) if name in LONGEST_FIRST and item.path.parent.name == "tests" else len(LONGEST_FIRST)
+
+    items.sort(key=rank)  # stable: every module stays contiguous, in its own order
+    for item in items:
+        if item.path.name not in SPREAD:
+            item.add_marker(pytest.mark.xdist_group(str(item.path.relative_to(config.rootpath))))
