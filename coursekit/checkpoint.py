@@ -254,16 +254,32 @@ def load_checkpoint(path: str | os.PathLike, device: Any = "auto", expected_type
         device: "auto", "cpu", "cuda", ... (``coursekit.device.resolve_device``).
         expected_type: if given, the checkpoint's policy_type must equal it.
     """
-    from safetensors import SafetensorError, safe_open
-    from safetensors.torch import load_file
-
-    from coursekit.config import config_from_dict
     from coursekit.device import resolve_device
-    from coursekit.policies import get_policy_class
-    from coursekit.policies.base import normalizers_from_json
 
     path = Path(path)
     info = read_checkpoint_info(path)
+    cls, config, normalizers = _policy_parts(path, info, expected_type)
+    tensors = _read_weights(path, info)
+    policy = cls(config, normalizers)
+    expected = policy.state_dict()
+    missing, unexpected = sorted(set(expected) - set(tensors)), sorted(set(tensors) - set(expected))
+    if missing or unexpected:
+        raise CheckpointError(f"checkpoint {str(path)!r} does not fit {cls.__name__}: missing tensors {missing[:5]}, "
+                              f"unexpected tensors {unexpected[:5]}")
+    for name, t in tensors.items():
+        if tuple(t.shape) != tuple(expected[name].shape):
+            raise CheckpointError(f"checkpoint {str(path)!r}: tensor {name!r} has shape {tuple(t.shape)}, "
+                                  f"the config builds {tuple(expected[name].shape)}")
+    policy.load_state_dict(tensors, strict=True)  # copies (and casts float16 storage) into the parameters
+    return policy.to(resolve_device(device)).eval()
+
+
+def _policy_parts(path: Path, info: dict[str, Any], expected_type: str | None) -> tuple[type, Any, dict[str, Any]]:
+    """The registered class, its config and the normalisers config.json describes (nothing built yet)."""
+    from coursekit.config import config_from_dict
+    from coursekit.policies import get_policy_class
+    from coursekit.policies.base import normalizers_from_json
+
     ptype = info["policy_type"]
     if expected_type is not None and ptype != expected_type:
         raise CheckpointError(f"checkpoint {str(path)!r} holds a {ptype!r} policy, expected {expected_type!r}")
@@ -272,10 +288,16 @@ def load_checkpoint(path: str | os.PathLike, device: Any = "auto", expected_type
     except ValueError as exc:
         raise CheckpointError(f"checkpoint {str(path)!r}: {exc}") from exc
     try:
-        config = config_from_dict(cls.config_class, info["config"])
-        normalizers = normalizers_from_json(info["normalizers"])
+        return cls, config_from_dict(cls.config_class, info["config"]), normalizers_from_json(info["normalizers"])
     except (ValueError, TypeError) as exc:
         raise CheckpointError(f"checkpoint {str(path)!r} has a config that does not fit {cls.__name__}: {exc}") from exc
+
+
+def _read_weights(path: Path, info: dict[str, Any]) -> dict[str, Any]:
+    """The tensors of the weights file config.json names, once its name, SHA-256 and config binding check out."""
+    from safetensors import SafetensorError, safe_open
+    from safetensors.torch import load_file
+
     entry = info["weights"]
     name = entry.get("file", WEIGHTS_FILE) if isinstance(entry, dict) else None
     if not isinstance(name, str) or Path(name).name != name or name in ("", ".", ".."):
@@ -301,18 +323,7 @@ def load_checkpoint(path: str | os.PathLike, device: Any = "auto", expected_type
         check_weights_binding(info, saved_with, str(weights))
     except ValueError as exc:
         raise CheckpointError(str(exc)) from None
-    policy = cls(config, normalizers)
-    expected = policy.state_dict()
-    missing, unexpected = sorted(set(expected) - set(tensors)), sorted(set(tensors) - set(expected))
-    if missing or unexpected:
-        raise CheckpointError(f"checkpoint {str(path)!r} does not fit {cls.__name__}: missing tensors {missing[:5]}, "
-                              f"unexpected tensors {unexpected[:5]}")
-    for name, t in tensors.items():
-        if tuple(t.shape) != tuple(expected[name].shape):
-            raise CheckpointError(f"checkpoint {str(path)!r}: tensor {name!r} has shape {tuple(t.shape)}, "
-                                  f"the config builds {tuple(expected[name].shape)}")
-    policy.load_state_dict(tensors, strict=True)  # copies (and casts float16 storage) into the parameters
-    return policy.to(resolve_device(device)).eval()
+    return tensors
 
 
 class CheckpointSaver:

@@ -100,7 +100,7 @@ class TeleopRecorder:
         if isinstance(first_seed, bool) or not isinstance(first_seed, (int, np.integer)) or first_seed < 0:
             raise ValueError(f"first_seed must be a non-negative int, got {first_seed!r}")
         self.config = config or TeleopConfig()
-        self.reset_state = None if reset_state is None else PushTEnv._check_state(reset_state)
+        self.reset_state = None if reset_state is None else PushTEnv.check_state(reset_state)
         if self.reset_state is not None and self.reset_state.shape != (5,):
             raise ValueError(f"reset_state must be (5,) [ax, ay, bx, by, angle], got shape {self.reset_state.shape}")
         self.path = None if path is None else Path(path)
@@ -170,7 +170,7 @@ class TeleopRecorder:
         """Apply one pusher target (2,) for one control step; returns True while still recording."""
         if self._rows is None:
             raise RuntimeError("not recording: call start() first")
-        action = np.clip(np.asarray(PushTEnv._check_action(target), dtype=np.float64), 0.0, geo.WORLD_SIZE)
+        action = np.clip(np.asarray(PushTEnv.check_action(target), dtype=np.float64), 0.0, geo.WORLD_SIZE)
         state = self.env.get_state()[:5]
         if self._success_step is not None:
             phase = REST

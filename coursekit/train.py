@@ -22,7 +22,7 @@ from __future__ import annotations
 import copy
 import math
 import time
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -233,99 +233,142 @@ def train(policy: Any, batches: Iterable[dict[str, Any]], config: TrainConfig, *
     torch.manual_seed(config.seed)
     policy.train()
     optimizer = make_optimizer(policy, config)
-    base_lrs = [g["lr"] for g in optimizer.param_groups]
     ema = EMA(policy, config.ema_power, config.ema_max_decay) if config.ema else None
-    budget_s = None if config.minutes is None else 60.0 * config.minutes
-    history: list[dict[str, float]] = []
-    sums: dict[str, float] = {}
-    step, n_logged, last_loss = 0, 0, float("nan")
-    samples, logged_samples = 0, 0  # rows actually trained on (a batcher cuts a batch to the data it has)
-    start = last_ckpt = last_log_t = time.perf_counter()
-    warm_end_t: float | None = None
-    bar_total = config.max_steps if config.max_steps is not None else int(budget_s)
-    bar = tqdm(total=bar_total, unit="step" if config.max_steps is not None else "s", disable=not config.progress,
+    run = _RunRecord(policy, ema, config, init_from, threads_used)
+    budget = _Budget(config, run.start)
+    bar = tqdm(total=config.max_steps if config.max_steps is not None else int(budget.seconds),
+               unit="step" if config.max_steps is not None else "s", disable=not config.progress,
                desc=f"train {getattr(policy, 'policy_type', '')}".strip(), dynamic_ncols=True)
-
-    def summary(seconds: float) -> dict[str, Any]:
-        return {"steps": step, "samples": samples, "seconds": round(seconds, 2),
-                "samples_per_s": round(samples / max(seconds, 1e-9), 1),
-                "final_loss": last_loss, "ema_decay": ema.decay if ema else None,
-                "train_config": config_to_dict(config), "torch_threads": threads_used,
-                "loss_curve": [[h["step"], round(h["seconds"], 1), round(h["loss"], 5)] for h in history],
-                "device": str(next(policy.parameters()).device),
-                **({"init_from": init_from} if init_from is not None else {})}
-
     try:
-        batch_iter = iter(batches)
-        while True:
-            now = time.perf_counter()
-            elapsed = now - start
-            if config.max_steps is not None and step >= config.max_steps:
-                break
-            if budget_s is not None and elapsed >= budget_s:
-                break
-            # LR for this step: warm-up by steps, then cosine over the budget used so far.
-            if step >= config.warmup_steps and warm_end_t is None:
-                warm_end_t = now
-            progress = 0.0
-            if config.max_steps is not None:
-                progress = (step - config.warmup_steps) / max(1, config.max_steps - config.warmup_steps)
-            if budget_s is not None and warm_end_t is not None:
-                remaining = max(1e-9, budget_s - (warm_end_t - start))
-                progress = max(progress, (now - warm_end_t) / remaining)
-            factor = lr_factor(step, config.warmup_steps, progress, config.lr_schedule)
-            for g, base in zip(optimizer.param_groups, base_lrs):
-                g["lr"] = base * factor
-
-            batch = next(batch_iter)
-            out = policy.compute_loss(batch)
-            loss = out["loss"]
-            if not torch.isfinite(loss):
-                raise ValueError(f"training loss became {loss.item()} at step {step}; check the data and the LR ({config.lr})")
-            optimizer.zero_grad(set_to_none=True)
-            loss.backward()
-            if config.grad_clip_norm is not None:
-                torch.nn.utils.clip_grad_norm_(policy.parameters(), config.grad_clip_norm)
-            optimizer.step()
-            if ema is not None:
-                ema.update(policy, step)
-            step += 1
-            rows = _batch_rows(batch, config.batch_size)
-            samples, logged_samples = samples + rows, logged_samples + rows
-            last_loss = float(loss.detach())
-            for k, v in out.items():
-                sums[k] = sums.get(k, 0.0) + float(v.detach() if torch.is_tensor(v) else v)
-            n_logged += 1
-
-            now = time.perf_counter()
-            if step % config.log_every == 0 or (config.max_steps is not None and step == config.max_steps):
-                row = {"step": step, "seconds": round(now - start, 3), "lr": base_lrs[0] * factor,
-                       "samples_per_s": logged_samples / max(now - last_log_t, 1e-9),
-                       **{k: v / n_logged for k, v in sums.items()}}
-                history.append(row)
-                sums, n_logged, logged_samples, last_log_t = {}, 0, 0, now
-                bar.set_postfix(loss=f"{row['loss']:.4f}", lr=f"{row['lr']:.1e}", sps=f"{row['samples_per_s']:.0f}")
-                _notify(callbacks, "on_log", {"step": step, "loss": row["loss"], "lr": row["lr"],
-                                              "samples_per_s": row["samples_per_s"], "wall_s": row["seconds"]})
-            bar.update(1 if config.max_steps is not None else int(now - start) - bar.n)
-            if (callbacks and config.checkpoint_every_minutes is not None
-                    and now - last_ckpt >= 60.0 * config.checkpoint_every_minutes):
-                _notify(callbacks, "on_checkpoint", ema.model if ema else policy,
-                        {**summary(now - start), "complete": False})
-                last_ckpt = time.perf_counter()
+        _optimise(policy, iter(batches), optimizer, ema, budget, run, bar, callbacks)
         bar.total = bar.n  # the budget is used up: end full and green (a time bar stops a second short)
     finally:
         bar.close()
         if config.num_threads is not None:
             torch.set_num_threads(threads_before)
 
-    seconds = time.perf_counter() - start
-    if step == 0:  # never hand an untrained policy to the checkpoint writer as if it were trained
+    seconds = time.perf_counter() - run.start
+    if run.step == 0:  # never hand an untrained policy to the checkpoint writer as if it were trained
         raise ValueError(f"the budget ended before the first optimiser step (minutes={config.minutes!r}); nothing was "
                          f"trained, so no checkpoint is written: give a budget of at least one step")
     final = ema.model if ema else policy
     final.eval()
-    result = TrainResult(policy=final, raw_policy=policy, history=history,
-                         summary={**summary(seconds), "complete": True})
+    result = TrainResult(policy=final, raw_policy=policy, history=run.history,
+                         summary={**run.summary(seconds), "complete": True})
     _notify(callbacks, "on_checkpoint", final, result.summary)
     return result
+
+
+def _optimise(policy: Any, batch_iter: Iterator[dict[str, Any]], optimizer: torch.optim.Optimizer, ema: EMA | None,
+              budget: _Budget, run: _RunRecord, bar: Any, callbacks: Sequence[Any]) -> None:
+    """The training loop: set the step's LR, take one optimiser step, log and checkpoint, until the budget ends."""
+    config = run.config
+    base_lrs = [g["lr"] for g in optimizer.param_groups]
+    last_ckpt = run.start
+    while not budget.spent(run.step, now := time.perf_counter()):
+        factor = budget.lr_factor(run.step, now)
+        for g, base in zip(optimizer.param_groups, base_lrs):
+            g["lr"] = base * factor
+        batch = next(batch_iter)
+        run.add(batch, _optimiser_step(policy, optimizer, ema, batch, run.step, config))
+
+        now = time.perf_counter()
+        if run.step % config.log_every == 0 or (config.max_steps is not None and run.step == config.max_steps):
+            row = run.log(now, base_lrs[0] * factor)
+            bar.set_postfix(loss=f"{row['loss']:.4f}", lr=f"{row['lr']:.1e}", sps=f"{row['samples_per_s']:.0f}")
+            _notify(callbacks, "on_log", {"step": run.step, "loss": row["loss"], "lr": row["lr"],
+                                          "samples_per_s": row["samples_per_s"], "wall_s": row["seconds"]})
+        bar.update(1 if config.max_steps is not None else int(now - run.start) - bar.n)
+        if (callbacks and config.checkpoint_every_minutes is not None
+                and now - last_ckpt >= 60.0 * config.checkpoint_every_minutes):
+            _notify(callbacks, "on_checkpoint", ema.model if ema else policy,
+                    {**run.summary(now - run.start), "complete": False})
+            last_ckpt = time.perf_counter()
+
+
+def _optimiser_step(policy: Any, optimizer: torch.optim.Optimizer, ema: EMA | None, batch: dict[str, Any],
+                    step: int, config: TrainConfig) -> dict[str, Any]:
+    """One AdamW step on ``batch`` (loss, backward, optional clipping, EMA update); returns ``compute_loss``'s dict."""
+    out = policy.compute_loss(batch)
+    loss = out["loss"]
+    if not torch.isfinite(loss):
+        raise ValueError(f"training loss became {loss.item()} at step {step}; check the data and the LR ({config.lr})")
+    optimizer.zero_grad(set_to_none=True)
+    loss.backward()
+    if config.grad_clip_norm is not None:
+        torch.nn.utils.clip_grad_norm_(policy.parameters(), config.grad_clip_norm)
+    optimizer.step()
+    if ema is not None:
+        ema.update(policy, step)
+    return out
+
+
+class _Budget:
+    """The stop rule (``max_steps`` and/or ``minutes``) and the LR schedule's progress through that budget."""
+
+    def __init__(self, config: TrainConfig, start: float) -> None:
+        self.config, self.start = config, start
+        self.seconds = None if config.minutes is None else 60.0 * config.minutes
+        self.warm_end_t: float | None = None  # when warm-up ended (a time budget's cosine starts there)
+
+    def spent(self, step: int, now: float) -> bool:
+        """True once ``step`` optimiser steps are done or the wall-clock budget is used up."""
+        if self.config.max_steps is not None and step >= self.config.max_steps:
+            return True
+        return self.seconds is not None and now - self.start >= self.seconds
+
+    def lr_factor(self, step: int, now: float) -> float:
+        """LR multiplier for ``step``: warm-up by steps, then cosine over the budget used so far."""
+        config = self.config
+        if step >= config.warmup_steps and self.warm_end_t is None:
+            self.warm_end_t = now
+        progress = 0.0
+        if config.max_steps is not None:
+            progress = (step - config.warmup_steps) / max(1, config.max_steps - config.warmup_steps)
+        if self.seconds is not None and self.warm_end_t is not None:
+            remaining = max(1e-9, self.seconds - (self.warm_end_t - self.start))
+            progress = max(progress, (now - self.warm_end_t) / remaining)
+        return lr_factor(step, config.warmup_steps, progress, config.lr_schedule)
+
+
+class _RunRecord:
+    """What a run has done so far: steps, samples, the mean losses of each ``log_every`` period, its summary."""
+
+    def __init__(self, policy: Any, ema: EMA | None, config: TrainConfig, init_from: dict[str, Any] | None,
+                 threads_used: int) -> None:
+        self.policy, self.ema, self.config = policy, ema, config
+        self.init_from, self.threads_used = init_from, threads_used
+        self.history: list[dict[str, float]] = []
+        self.sums: dict[str, float] = {}
+        self.step, self.n_logged, self.last_loss = 0, 0, float("nan")
+        self.samples, self.logged_samples = 0, 0  # rows actually trained on (a batcher cuts a batch to the data it has)
+        self.start = self.last_log_t = time.perf_counter()
+
+    def add(self, batch: Any, out: dict[str, Any]) -> None:
+        """Count one optimiser step on ``batch`` and its ``compute_loss`` outputs ``out``."""
+        self.step += 1
+        rows = _batch_rows(batch, self.config.batch_size)
+        self.samples, self.logged_samples = self.samples + rows, self.logged_samples + rows
+        self.last_loss = float(out["loss"].detach())
+        for k, v in out.items():
+            self.sums[k] = self.sums.get(k, 0.0) + float(v.detach() if torch.is_tensor(v) else v)
+        self.n_logged += 1
+
+    def log(self, now: float, lr: float) -> dict[str, float]:
+        """Close the log period: append (and return) its history row of means, then start the next."""
+        row = {"step": self.step, "seconds": round(now - self.start, 3), "lr": lr,
+               "samples_per_s": self.logged_samples / max(now - self.last_log_t, 1e-9),
+               **{k: v / self.n_logged for k, v in self.sums.items()}}
+        self.history.append(row)
+        self.sums, self.n_logged, self.logged_samples, self.last_log_t = {}, 0, 0, now
+        return row
+
+    def summary(self, seconds: float) -> dict[str, Any]:
+        """The run's summary after ``seconds`` (stored in checkpoints; see :class:`TrainResult`)."""
+        return {"steps": self.step, "samples": self.samples, "seconds": round(seconds, 2),
+                "samples_per_s": round(self.samples / max(seconds, 1e-9), 1),
+                "final_loss": self.last_loss, "ema_decay": self.ema.decay if self.ema else None,
+                "train_config": config_to_dict(self.config), "torch_threads": self.threads_used,
+                "loss_curve": [[h["step"], round(h["seconds"], 1), round(h["loss"], 5)] for h in self.history],
+                "device": str(next(self.policy.parameters()).device),
+                **({"init_from": self.init_from} if self.init_from is not None else {})}

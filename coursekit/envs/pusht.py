@@ -209,7 +209,7 @@ class PushTEnv(gym.Env):
         replay, reset a fresh env the way the episode was reset (same ``seed`` or
         ``reset_to_state``) and apply the recorded actions (``coursekit.teleop.replay``).
         """
-        s = self._check_state(state)
+        s = self.check_state(state)
         space = self._space
         # Removing and re-adding the shapes drops their cached contacts (about 10 us).
         space.remove(*self._dynamic_shapes)
@@ -222,7 +222,8 @@ class PushTEnv(gym.Env):
         space.add(*self._dynamic_shapes)
 
     @staticmethod
-    def _check_state(state) -> np.ndarray:
+    def check_state(state) -> np.ndarray:
+        """``state`` as a finite float64 (5,) [ax, ay, bx, by, angle] or (7,) (+ agent vx, vy); else ValueError."""
         try:
             s = np.asarray(state, dtype=np.float64)
         except (TypeError, ValueError) as err:
@@ -291,7 +292,7 @@ class PushTEnv(gym.Env):
     def physics_step(self, action) -> None:
         """Only the physics of one env step (no observation, reward or step count): the cheap
         primitive for planners' look-ahead in a scratch env (tens of microseconds)."""
-        ax, ay = self._check_action(action)
+        ax, ay = self.check_action(action)
         self._last_action = np.array([ax, ay])
         agent, space, dt = self._agent, self._space, self.dt
         for _ in range(self.n_substeps):
@@ -303,7 +304,8 @@ class PushTEnv(gym.Env):
             space.step(dt)
 
     @staticmethod
-    def _check_action(action) -> tuple[float, float]:
+    def check_action(action) -> tuple[float, float]:
+        """A finite pusher target (2,) as (x, y) clipped to the world [0, 512]; else ValueError."""
         a = finite_array(action, (2,), "action", "= pusher target (x, y)")
         x, y = float(a[0]), float(a[1])
         # Documented departure: targets outside the world are clipped to [0, 512].

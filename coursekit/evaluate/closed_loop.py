@@ -88,50 +88,67 @@ def rollout(predict_chunk: Callable[[Any], Any], make_env: Callable[[], Any], ob
     start = time.perf_counter()
     executor = executor_factory(timed)  # first: a bad executor option fails before any env is built
     envs = [make_env() for _ in seeds]
-    n = len(envs)
     obs = [env.reset(seed=int(s))[0] for env, s in zip(envs, seeds)]
     executor.reset(obs_fn(obs))
-    executor_name = type(executor).__name__
-    max_reward = np.zeros(n)
-    success = np.zeros(n, dtype=bool)
-    length = np.zeros(n, dtype=np.int64)
-    done = np.zeros(n, dtype=bool)
-    states = [[state_fn(e)] for e in envs] if record else None
-    actions: list[list[np.ndarray]] | None = [[] for _ in envs] if record else None
+    episodes = _LockStep(envs, state_fn, record)
     bar = tqdm(total=max_steps, desc=desc, disable=not progress, dynamic_ncols=True)
     try:
         for _ in range(max_steps):
             act = executor.act(obs_fn(obs))
-            act = act.detach().cpu().numpy() if hasattr(act, "detach") else np.asarray(act)  # (B, Da)
-            for i, env in enumerate(envs):
-                if done[i]:
-                    continue
-                obs[i], reward, terminated, truncated, info = env.step(act[i])
-                max_reward[i] = max(max_reward[i], float(reward))
-                success[i] |= bool(info.get("is_success", terminated))
-                length[i] += 1
-                done[i] = terminated or truncated
-                if record:
-                    states[i].append(state_fn(env))
-                    actions[i].append(np.asarray(act[i], dtype=np.float64))
+            episodes.step(obs, act.detach().cpu().numpy() if hasattr(act, "detach") else np.asarray(act))
             bar.update(1)
-            bar.set_postfix(score=f"{max_reward.mean():.3f}", done=f"{int(done.sum())}/{n}")
-            if done.all():
+            bar.set_postfix(score=f"{episodes.max_reward.mean():.3f}", done=f"{int(episodes.done.sum())}/{len(envs)}")
+            if episodes.done.all():
                 break
         bar.total = bar.n  # finished (all done, or max_steps): the bar ends full and green, not red
     finally:
         bar.close()
         for env in envs:
             env.close()
-    if record:  # pad finished episodes with their last state/action so the arrays are rectangular
-        t_max = max(len(a) for a in actions)
-        states = np.stack([np.stack(s + [s[-1]] * (t_max + 1 - len(s))) for s in states])  # (N, T+1, S)
-        actions = np.stack([np.stack(a + [a[-1]] * (t_max - len(a))) if a else np.zeros((t_max, act.shape[-1]))
-                            for a in actions])  # (N, T, Da)
-    return EvalResult(seeds=[int(s) for s in seeds], max_reward=max_reward, success=success, length=length,
-                      seconds=time.perf_counter() - start, chunk_calls=timing["calls"],
+    states, actions = episodes.recorded() if record else (None, None)
+    return EvalResult(seeds=[int(s) for s in seeds], max_reward=episodes.max_reward, success=episodes.success,
+                      length=episodes.length, seconds=time.perf_counter() - start, chunk_calls=timing["calls"],
                       chunk_seconds=timing["seconds"], states=states, actions=actions,
-                      info={"executor": executor_name})
+                      info={"executor": type(executor).__name__})
+
+
+class _LockStep:
+    """B environments stepped together: each one's best reward, success, length and done flag (N,),
+    and, when recording, its states and actions; a finished episode is frozen while the others go on."""
+
+    def __init__(self, envs: list[Any], state_fn: Callable[[Any], np.ndarray], record: bool) -> None:
+        n = len(envs)
+        self.envs, self.state_fn, self.record = envs, state_fn, record
+        self.max_reward = np.zeros(n)
+        self.success = np.zeros(n, dtype=bool)
+        self.length = np.zeros(n, dtype=np.int64)
+        self.done = np.zeros(n, dtype=bool)
+        self.states = [[state_fn(e)] for e in envs] if record else None
+        self.actions: list[list[np.ndarray]] | None = [[] for _ in envs] if record else None
+        self.action_dim = 0
+
+    def step(self, obs: list[Any], act: np.ndarray) -> None:
+        """Step each unfinished env ``i`` with ``act[i]`` (``act``: (B, Da)); ``obs[i]`` becomes its new observation."""
+        self.action_dim = act.shape[-1]
+        for i, env in enumerate(self.envs):
+            if self.done[i]:
+                continue
+            obs[i], reward, terminated, truncated, info = env.step(act[i])
+            self.max_reward[i] = max(self.max_reward[i], float(reward))
+            self.success[i] |= bool(info.get("is_success", terminated))
+            self.length[i] += 1
+            self.done[i] = terminated or truncated
+            if self.record:
+                self.states[i].append(self.state_fn(env))
+                self.actions[i].append(np.asarray(act[i], dtype=np.float64))
+
+    def recorded(self) -> tuple[np.ndarray, np.ndarray]:
+        """(states (N, T + 1, S), actions (N, T, Da)): finished episodes padded with their last state/action."""
+        t_max = max(len(a) for a in self.actions)
+        states = np.stack([np.stack(s + [s[-1]] * (t_max + 1 - len(s))) for s in self.states])
+        actions = np.stack([np.stack(a + [a[-1]] * (t_max - len(a))) if a else np.zeros((t_max, self.action_dim))
+                            for a in self.actions])
+        return states, actions
 
 
 def evaluate(policy: Any, adapter: TaskAdapter, seeds: Sequence[int], *, max_steps: int | None = None,

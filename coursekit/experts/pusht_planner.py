@@ -319,10 +319,8 @@ def collect_dataset(n_episodes: int, seed: int, progress: bool = True, config: E
     toss), rest_steps, coursekit_version. Pixel observations can be rendered from the stored
     states afterwards (``coursekit.envs.pusht_render``).
     """
-    import coursekit
     from coursekit.data import EpisodeDataset
     from coursekit.envs.pusht import PushTEnv
-    from tqdm.auto import tqdm
 
     if isinstance(n_episodes, bool) or not isinstance(n_episodes, (int, np.integer)) or n_episodes < 1:
         raise ValueError(f"n_episodes must be a positive int, got {n_episodes!r}")
@@ -334,43 +332,55 @@ def collect_dataset(n_episodes: int, seed: int, progress: bool = True, config: E
                          f"got {action_noise!r}")
     expert = PushTExpert(config, style)
     env = PushTEnv(obs_type="state", max_episode_steps=expert.config.max_steps)
-    episodes, meta_seeds, failed, success_steps, finish_steps, choices = [], [], [], [], [], []
-    episode_noise = []
-    max_attempts = 2 * int(n_episodes) + 10
-    with tqdm(total=int(n_episodes), desc="PushT expert", unit="episode", disable=not progress) as bar:
+    solved, failed = _solved_episodes(expert, env, int(n_episodes), int(seed), levels, progress)
+    episodes = [{"state": rec.states, "action": rec.actions, "coverage": rec.coverage, "phase": rec.phases}
+                for _, _, rec in solved]
+    return EpisodeDataset.from_episodes(episodes, _dataset_meta(expert, int(seed), levels, solved, failed))
+
+
+def _solved_episodes(expert: PushTExpert, env, n_episodes: int, seed: int, levels: list[float],
+                     progress: bool) -> tuple[list[tuple[int, float, EpisodeRecord]], list[int]]:
+    """Run the resets ``seed, seed + 1, ...`` (noise levels cycled) until ``n_episodes`` are solved:
+    (reset seed, noise level, record) of each solved one, and the seeds that failed."""
+    from tqdm.auto import tqdm
+
+    solved, failed = [], []
+    max_attempts = 2 * n_episodes + 10
+    with tqdm(total=n_episodes, desc="PushT expert", unit="episode", disable=not progress) as bar:
         for attempt in range(max_attempts):
-            if len(episodes) == n_episodes:
+            if len(solved) == n_episodes:
                 break
-            episode_seed = int(seed) + attempt
-            level = levels[attempt % len(levels)]
+            episode_seed, level = seed + attempt, levels[attempt % len(levels)]
             rec = expert.run_episode(env, episode_seed, action_noise=level)
             if rec.success_step is None:
                 failed.append(episode_seed)
                 continue
-            episodes.append({"state": rec.states, "action": rec.actions,
-                             "coverage": rec.coverage, "phase": rec.phases})
-            meta_seeds.append(episode_seed)
-            episode_noise.append(level)
-            success_steps.append(rec.success_step)
-            finish_steps.append(rec.finish_step)
-            choices.append(rec.route_choices)
+            solved.append((episode_seed, level, rec))
             bar.update(1)
-    if len(episodes) < n_episodes:
-        raise RuntimeError(f"the expert solved only {len(episodes)} of {max_attempts} resets from seed {seed}; "
+    if len(solved) < n_episodes:
+        raise RuntimeError(f"the expert solved only {len(solved)} of {max_attempts} resets from seed {seed}; "
                            f"failed seeds: {failed[:20]}")
-    meta = {
+    return solved, failed
+
+
+def _dataset_meta(expert: PushTExpert, seed: int, levels: list[float], solved: list[tuple[int, float, EpisodeRecord]],
+                  failed: list[int]) -> dict:
+    """The dataset's meta (the keys ``collect_dataset`` lists): how and from which resets it was made."""
+    import coursekit
+
+    return {
         "env_id": PUSHT.gym_id, "obs_type": "state",
         "expert": EXPERT_NAME, "expert_version": EXPERT_VERSION,
         "expert_config": asdict(expert.config),
-        "expert_style": None if style is None else asdict(style),
-        "seed": int(seed), "n_episodes": int(n_episodes),
-        "action_noise": levels, "episode_noise": episode_noise,
-        "episode_seeds": meta_seeds, "failed_seeds": failed, "success_steps": success_steps,
-        "finish_steps": finish_steps,
-        "route_choices": choices, "rest_steps": expert.config.rest_steps,
+        "expert_style": None if expert.style is None else asdict(expert.style),
+        "seed": seed, "n_episodes": len(solved),
+        "action_noise": levels, "episode_noise": [level for _, level, _ in solved],
+        "episode_seeds": [s for s, _, _ in solved], "failed_seeds": failed,
+        "success_steps": [rec.success_step for _, _, rec in solved],
+        "finish_steps": [rec.finish_step for _, _, rec in solved],
+        "route_choices": [rec.route_choices for _, _, rec in solved], "rest_steps": expert.config.rest_steps,
         "phase_names": list(PHASE_NAMES),
         "state_columns": ["agent_x", "agent_y", "block_x", "block_y", "block_angle_unwrapped"],
         "action_columns": ["target_x", "target_y"],
         "coursekit_version": coursekit.__version__,
     }
-    return EpisodeDataset.from_episodes(episodes, meta)
