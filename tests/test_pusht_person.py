@@ -57,3 +57,15 @@ def test_bad_style_names_the_field(bad):
     field = next(iter(bad))
     with pytest.raises(ValueError, match=field):
         PersonStyle(**bad)
+
+
+def test_collect_command_records_person_style_demonstrations(tmp_path):
+    """`coursekit collect pusht --style person` writes the person-like episodes, tagged as such in the meta."""
+    from coursekit.cli import main
+    from coursekit.data.episodes import EpisodeDataset
+
+    out = tmp_path / "person.npz"
+    assert main(["collect", "pusht", "--episodes", "1", "--seed", "7", "--style", "person", "--out", str(out),
+                 "--no-progress"]) == 0
+    data = EpisodeDataset.load(out)
+    np.testing.assert_array_equal(data.episode(0)["action"], _run(PersonStyle(), 7).actions)

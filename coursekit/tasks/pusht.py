@@ -26,7 +26,7 @@ PUSHT = Task(
     max_steps=300,
     features="pusht_state",
     expert="coursekit.experts.pusht_planner:collect_dataset",
-    expert_options=("action_noise",),
+    expert_options=("action_noise", "style"),
     demo_episodes=200,
     image_env_kwargs=_pixels,
     replay=ReplayDrawing(viewer="pusht", columns=(0, 5), panel_hw=(256, 256)),
