@@ -50,8 +50,10 @@ FIGURE = re.compile(
     rf"(?:(?P<num>{DECIMAL}(?:,\s*{DECIMAL})+|{NUM})(?P<pct>\s?%)?(?:\s?{UNIT})?\s*)?"
     rf"(?:\[(?P<lo>{NUM})(?P<lopct>\s?%)?,\s*(?P<hi>{NUM})(?P<hipct>\s?%)?\](?:\s?{UNIT})?)?"
     r"[*_]*\s*$")
-MASKED = re.compile(r"```.*?```|`[^`\n]*`|\$\$.*?\$\$|\$[^$\n]+\$|<!--.*?-->|https?://\S+|\]\([^)]*\)", re.S)
-"""Code, maths, comments, link targets: never prose numbers (a tag's own text is checked on its own)."""
+CODE = re.compile(r"```.*?```|`[^`]+`", re.S)
+"""Code blocks and spans: neither prose numbers nor tags (the README shows the tag syntax in code)."""
+MASKED = re.compile(r"\$\$.*?\$\$|\$[^$\n]+\$|<!--.*?-->|https?://\S+|\]\([^)]*\)", re.S)
+"""Maths, comments, link targets: never prose numbers (a tag's own text is checked on its own)."""
 
 NEVER_MEASURED_AFTER = re.compile(r"\s?(?:M\b|m\b|ms per (?:control )?step|ms period)")
 """Context after a number that makes it a parameter count (4.5 M), a length (0.8 m) or a control period."""
@@ -117,9 +119,9 @@ def row_n(row: dict) -> int | None:
     return int(m.group(2)) - int(m.group(1)) + 1 if m else None
 
 
-def _masked(text: str) -> str:
-    """``text`` with code, maths, comments and link targets blanked out (offsets and newlines kept)."""
-    return MASKED.sub(lambda m: re.sub(r"[^\n]", " ", m.group(0)), text)
+def _blank(pattern: re.Pattern, text: str) -> str:
+    """``text`` with every match of ``pattern`` blanked out (offsets and newlines kept)."""
+    return pattern.sub(lambda m: re.sub(r"[^\n]", " ", m.group(0)), text)
 
 
 def _sentence(visible: str, pos: int) -> str:
@@ -185,11 +187,12 @@ def _check_row_tag(body: str, fig: re.Match, table: dict, sentence: str) -> list
 
 def check_markdown(text: str, table: dict) -> list[tuple[int, str]]:
     """Every problem in one markdown text as (line number from 1, message)."""
-    visible = _masked(text)
+    prose = _blank(CODE, text)
+    visible = _blank(MASKED, prose)
     covered = [False] * len(text)
     problems: list[tuple[int, str]] = []
     line_of = lambda pos: text.count("\n", 0, pos) + 1  # noqa: E731
-    for tag in TAG.finditer(text):
+    for tag in TAG.finditer(prose):
         kind, body = tag.group(1), (tag.group(2) or "").strip()
         head = max(0, tag.start() - 200)
         fig = FIGURE.search(visible, head, tag.start())
