@@ -20,6 +20,13 @@ set and, as known, its demonstrations and episodes); ``not-measured`` a number t
 measured. A row measured on fewer than 200 episodes (its ``n``, or the note's "50 held-out
 seeds") must have its n stated in the sentence ("on 50 held-out seeds", "n = 48").
 
+What looks measured (and so needs a tag): a percentage (not "95 % interval"), a number in ms,
+rad/s^3, px/step^3 or samples/s, a ratio like "2.5x", an interval with a decimal in it, and any
+decimal. Not measurements: code and maths, a heading's or a table cell's leading item number
+("## 5.6", "| 1.1 training windows"), a decimal after "=", "<", ">", "~", "+-" or after
+exercise/section/chapter/Python/version, a parameter count or length ("4.5 M", "0.8 m") and a
+control period ("100 ms per step"); write a setting as ``name = value`` or as code.
+
 ``python -m benchmarks.check_text`` prints every violation as ``file:cell:line: message``
 (cell ``-`` in the README) and exits 1 if there is one; ``tests/test_text_bound_to_rows.py`` runs it.
 """
@@ -33,9 +40,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-RESULTS = ROOT / "benchmarks" / "results.json"
-README = ROOT / "README.md"
-NOTEBOOKS = ROOT / "notebooks"
 GENERATED = ("<!-- results:start -->", "<!-- results:end -->")
 """The README's results table is rendered from the rows (benchmarks/results.py): not prose."""
 MIN_N = 200
@@ -61,7 +65,7 @@ NEVER_MEASURED_BEFORE = re.compile(
     r"(?:[=<>\u2264\u2265\u2248~\u00b1]|[Ee]xercises?|[Ss]ections?|\u00a7|[Cc]hapters?|[Ss]ec\.|[Ee]q\.|"
     r"Table|Fig\.|Figure|Python|[Vv]ersion|lerobot|MuJoCo|torch|ch\.)\s*$")
 """Context before a decimal that makes it a name, a version or a set value, not a measurement."""
-CANDIDATES = [
+CANDIDATES = [  # (what it looks like, pattern): each match outside a tag's figure needs a tag
     ("a percentage", re.compile(rf"(?<![\w.]){NUM}\s?%(?!\s*(?:t-)?(?:interval|confidence|CI|Wilson|bootstrap))")),
     ("a latency, jerk or rate", re.compile(
         rf"(?<![\w.]){NUM}\s?(?:ms|rad/s\^3|rad/s\u00b3|px/step\^3|samples/s|steps/s)(?!\w)")),
@@ -69,7 +73,9 @@ CANDIDATES = [
     ("an interval", re.compile(rf"\[(?=[^\]]*\.){NUM},\s*{NUM}\]")),
     ("a decimal", re.compile(r"(?<![\w.\-\u2212+])[+\-\u2212]?\d+\.\d+(?!\w|\.\d)")),
 ]
-STATED_N = r"(?:\bn\s*=\s*{n}\b|(?<![\w.]){n}\s+(?:[\w-]+\s+){{0,2}}(?:episodes?|seeds?|starts?|rollouts?|runs?|trials?|samples?|chunks?|states?)\b)"
+STATED_N = (r"(?:\bn\s*=\s*{n}\b|(?<![\w.]){n}\s+(?:[\w-]+\s+){{0,2}}"
+            r"(?:episodes?|seeds?|starts?|rollouts?|runs?|trials?|samples?|chunks?|states?)\b)")
+"""How a sentence states a row's n: "n = 48", "50 held-out seeds", "78 two-way starts"."""
 NOTE_N = [re.compile(r"(\d+) held-out (?:seeds|episodes)"), re.compile(r"\bn\s*=\s*(\d+)"),
           re.compile(r"(\d+) (?:episodes|seeds|starts)\b")]
 NOTE_SEED_RANGE = re.compile(r"seeds? (\d+)\s*\.\.\s*(\d+)")
@@ -191,7 +197,10 @@ def check_markdown(text: str, table: dict) -> list[tuple[int, str]]:
     visible = _blank(MASKED, prose)
     covered = [False] * len(text)
     problems: list[tuple[int, str]] = []
-    line_of = lambda pos: text.count("\n", 0, pos) + 1  # noqa: E731
+
+    def line_of(pos: int) -> int:
+        return text.count("\n", 0, pos) + 1
+
     for tag in TAG.finditer(prose):
         kind, body = tag.group(1), (tag.group(2) or "").strip()
         head = max(0, tag.start() - 200)
@@ -226,7 +235,7 @@ def _exempt(visible: str, m: re.Match) -> bool:
     return bool(NEVER_MEASURED_BEFORE.search(before[-12:]))
 
 
-def _readme_prose(text: str) -> str:
+def readme_prose(text: str) -> str:
     """The README without its generated results table (blank lines keep the line numbers)."""
     start, end = GENERATED
     if start not in text or end not in text:
@@ -241,7 +250,7 @@ def check_repo(root: Path = ROOT) -> list[Violation]:
     table = json.loads((root / "benchmarks" / "results.json").read_text())
     found = []
     readme = root / "README.md"
-    for line, message in check_markdown(_readme_prose(readme.read_text()), table):
+    for line, message in check_markdown(readme_prose(readme.read_text()), table):
         found.append(Violation("README.md", "-", line, message))
     for path in sorted((root / "notebooks").glob("*.ipynb")):
         cells = json.loads(path.read_text())["cells"]
@@ -253,11 +262,15 @@ def check_repo(root: Path = ROOT) -> list[Violation]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    found = check_repo()
+    import argparse
+
+    parser = argparse.ArgumentParser(description="list numbers in the course's prose that are not bound to their rows")
+    parser.add_argument("--root", type=Path, default=ROOT, help="repository root (default: this checkout)")
+    found = check_repo(parser.parse_args(argv).root)
     for v in found:
         print(v)
-    print(f"{len(found)} number(s) in the text not bound to their rows" if found else "every number is bound to its row",
-          file=sys.stderr)
+    summary = f"{len(found)} number(s) in the text not bound to their rows" if found else "every number is bound to its row"
+    print(summary, file=sys.stderr)
     return 1 if found else 0
 
 
