@@ -60,15 +60,19 @@ def _matches(quoted, values):
 
 
 def test_readme_claims_cite_rows_that_hold_their_numbers():
-    """Every number in the README's claims block is in a results row that its bullet names."""
+    """Every number in the README's claims block is in a results row that its bullet names (by a
+    [section/name] citation or a <!-- row: ... --> tag; tests/test_text_bound_to_rows.py checks each tag's own number)."""
     text = results.README.read_text()
     assert "<!-- claims:start -->" in text and "<!-- claims:end -->" in text
     block = text.split("<!-- claims:start -->", 1)[1].split("<!-- claims:end -->", 1)[0]
     table = json.loads(results.RESULTS.read_text())
     bullets = [b.split("\n\n", 1)[0] for b in re.split(r"\n- ", block)[1:]]  # a bullet ends at a blank line
     assert len(bullets) >= 3, "the claims block has no bullets"
+    by_name = {row["name"]: key for key, row in table.items()}
     for bullet in bullets:
         cited = re.findall(r"\[([^\]]+/[^\]]+)\]", bullet)  # [section/name] of each row it rests on
+        tags = re.findall(r"<!--\s*row:\s*(.*?)\s*(?:\|.*?)?-->", bullet, re.S)  # benchmarks/check_text.py's tags
+        cited += [tag if tag in table else by_name.get(tag, tag) for tag in tags]
         assert cited, f"bullet cites no row: {bullet[:80]!r}"
         values = []
         for key in cited:
@@ -78,7 +82,7 @@ def test_readme_claims_cite_rows_that_hold_their_numbers():
             values += list(row.get("interval", [])) + ([row["n"]] if "n" in row else [])
             words = " ".join([row["name"], row["note"], row.get("seeds", "")]).replace("-", " ").replace("=", " ")
             values += [float(x) for x in _numbers(words)]
-        prose = re.sub(r"\[[^\]]+/[^\]]+\]", "", bullet)
+        prose = re.sub(r"\[[^\]]+/[^\]]+\]|<!--.*?-->", "", bullet, flags=re.S)
         for quoted in _numbers(prose):
             assert _matches(quoted, values), f"{quoted} in {bullet[:60]!r}... is in none of its rows {cited}"
 
