@@ -103,7 +103,8 @@ def write_autograder(zip_path: str | Path, exercises: list[str] | None = None, h
     chosen = [get_exercise(e) for e in exercises] if exercises else list(EXERCISES)
     hidden = load_hidden_tests(hidden_tests).sources if hidden_tests is not None else {}
     root = repo_root()
-    check_hidden_imports(hidden, read_requirements(root / REQUIREMENTS_FILE))
+    if hidden_tests is not None:  # load_hidden_tests checked the files are UTF-8 Python
+        check_hidden_imports(hidden_tests, read_requirements(root / REQUIREMENTS_FILE))
     limits = limits or Limits()
     config = {"exercises": [e.id for e in chosen],
               "limits": {k: getattr(limits, k) for k in ("timeout_s", "test_timeout_s", "memory_mb", "output_mb", "disk_mb")},

@@ -76,12 +76,16 @@ def providers(module: str) -> set[str]:
     return {normalise(d) for d in importlib.metadata.packages_distributions().get(module, [])}
 
 
-def check_hidden_imports(sources: dict[str, bytes], pins: list[Pin]) -> None:
-    """ValueError naming the file and module when a hidden test imports a package the image lacks."""
+def check_hidden_imports(folder: str | Path, pins: list[Pin]) -> None:
+    """ValueError naming the file and module when a hidden test in ``folder`` (its ``*.py`` but
+    conftest.py, as :func:`coursekit.grading.report.load_hidden_tests` takes them) imports a package
+    the image lacks."""
     installed, direct = {p.name for p in pins}, sorted(p.name for p in pins if not p.via)
-    for name, data in sorted(sources.items()):
-        for module in sorted(third_party(imported_modules(data.decode("utf-8"), name))):
+    for path in sorted(Path(folder).glob("*.py")):
+        if path.name == "conftest.py":
+            continue
+        for module in sorted(third_party(imported_modules(path.read_text(encoding="utf-8"), str(path)))):
             if not providers(module) & installed:
-                raise ValueError(f"hidden test {name} imports {module!r}, which the autograder image does not install "
+                raise ValueError(f"hidden test {path} imports {module!r}, which the autograder image does not install "
                                  f"(it holds {', '.join(direct)} and what they need): add its pin to {REQUIREMENTS_FILE} "
                                  "or drop the import")
