@@ -1,12 +1,14 @@
 """The Gradescope autograder zip: run_autograder against a simulated /autograder tree writes the
-results.json Gradescope expects (scores, hidden tests reduced to name/points/status)."""
+results.json Gradescope expects (scores, hidden tests reduced to name/points/status), run by a
+Python that sees only requirements-grading.txt's packages (what the zip's setup.sh installs)."""
 
 from __future__ import annotations
 
+import importlib.metadata
 import json
 import os
 import subprocess
-import sys
+import venv
 import zipfile
 from pathlib import Path
 
@@ -14,8 +16,9 @@ import pytest
 
 from coursekit.cli import main
 from coursekit.grading.exercises import get_exercise, repo_root
+from coursekit.grading.requirements import REQUIREMENTS_FILE, read_requirements
 
-pytestmark = pytest.mark.slow  # one grading run: ~5-15 s
+pytestmark = pytest.mark.slow  # two grading runs: ~10-30 s
 
 HIDDEN = '''
 import numpy as np
@@ -32,6 +35,38 @@ def test_long_episode(student):
 def test_secret_failing(student):
     assert False, "SECRET-MESSAGE the student must not see"
 '''
+
+
+def grading_only_python(home: Path) -> Path:
+    """The python of a new venv holding only requirements-grading.txt's distributions, their files
+    hard-linked (copied across file systems) from this environment: seconds, not a download. The
+    pip install itself (the pinned versions, from the registry) is benchmarks/check_grading_image.py."""
+    venv.create(home, with_pip=False, symlinks=True)
+    site = next(home.glob("lib/python*/site-packages"))
+    for pin in read_requirements(repo_root() / REQUIREMENTS_FILE):
+        dist = importlib.metadata.distribution(pin.name)
+        if not pin.via:  # environment.txt pins these to the same versions
+            assert dist.version == pin.version.split("+")[0] or dist.version == pin.version, (pin, dist.version)
+        for file in dist.files or []:
+            source = Path(dist.locate_file(file))
+            if file.parts[0] == ".." or not source.is_file():
+                continue  # scripts in bin/; files RECORD lists but that are gone
+            (site / file).parent.mkdir(parents=True, exist_ok=True)
+            try:
+                os.link(source, site / file)
+            except OSError:
+                (site / file).write_bytes(source.read_bytes())
+    return home / "bin" / "python"
+
+
+def run_autograder(tree: Path, python: Path) -> dict:
+    """Run the zip's run_autograder on ``tree`` (a simulated /autograder) and return its results.json."""
+    env = {**os.environ, "AUTOGRADER_ROOT": str(tree), "COURSEKIT_PYTHON": str(python)}
+    env.pop("PYTHONPATH", None)
+    proc = subprocess.run(["bash", str(tree / "source" / "run_autograder")], env=env, capture_output=True,
+                          text=True, timeout=600)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return json.loads((tree / "results" / "results.json").read_text())
 
 
 def test_autograder_zip_runs_against_a_simulated_tree(tmp_path, capsys):
@@ -53,12 +88,10 @@ def test_autograder_zip_runs_against_a_simulated_tree(tmp_path, capsys):
     (tree / "submission" / "nested").mkdir(parents=True)  # modules one folder down, as students upload them
     (tree / "submission" / "nested" / "chunk_windows.py").write_text(
         (repo_root() / "solutions" / "chunk_windows.py").read_text())
-    env = {**os.environ, "AUTOGRADER_ROOT": str(tree), "COURSEKIT_PYTHON": sys.executable}
-    env.pop("PYTHONPATH", None)
-    proc = subprocess.run(["bash", str(tree / "source" / "run_autograder")], env=env, capture_output=True,
-                          text=True, timeout=600)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    result = json.loads((tree / "results" / "results.json").read_text())
+    python = grading_only_python(tmp_path / "venv")
+    missing = subprocess.run([str(python), "-c", "import scipy"], capture_output=True, text=True)
+    assert "No module named 'scipy'" in missing.stderr, "the grading venv sees more than its requirements"
+    result = run_autograder(tree, python)
     visible = get_exercise("chunk_windows").max_points
     assert result["score"] == visible + 2  # all visible tests and the passing hidden one
     tests = {t["name"]: t for t in result["tests"]}
@@ -69,6 +102,14 @@ def test_autograder_zip_runs_against_a_simulated_tree(tmp_path, capsys):
     assert tests["1.1 chunk_windows: test_long_episode (hidden)"]["status"] == "passed"
     assert all(t["status"] == "passed" for n, t in tests.items() if "hidden" not in n)
     assert str(tmp_path) not in json.dumps(result), "an absolute path of the grading machine leaked"
+
+    # the untouched stub: zero, every test failing on the exercise's NotImplementedError (not an import)
+    (tree / "submission" / "nested" / "chunk_windows.py").write_text(
+        (repo_root() / "exercises" / "chunk_windows.py").read_text())
+    result = run_autograder(tree, python)
+    visible = [t for t in result["tests"] if "hidden" not in t["name"]]
+    assert result["score"] == 0 and visible and all(t["status"] == "failed" for t in visible)
+    assert all("NotImplementedError: Exercise 1.1" in t["output"] for t in visible), visible[0]["output"]
 
 
 def test_check_never_sees_hidden_tests(tmp_path):

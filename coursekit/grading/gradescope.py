@@ -3,13 +3,15 @@
 ``coursekit grade --gradescope-autograder autograder.zip [--exercise ID ...] [--hidden-tests DIR]``
 writes a zip with, at its root:
 
-- ``setup.sh``: run once when Gradescope builds the image (Ubuntu, as root): installs
-  bubblewrap and Python >= 3.11, and the pinned ``environment.txt`` into ``source/.venv``;
+- ``setup.sh``: run once when Gradescope builds the image (:data:`IMAGE`, as root): installs
+  bubblewrap and Python 3.11, and ONLY ``requirements-grading.txt`` (torch's CPU build, numpy,
+  pytest, tqdm, psutil and what they need; :mod:`coursekit.grading.requirements`) into
+  ``source/.venv``, with ``--no-deps`` so nothing unlisted arrives;
 - ``run_autograder``: run per submission; grades ``/autograder/submission`` with
   ``python -m coursekit.grading.gradescope run`` and writes ``/autograder/results/results.json``;
-- the ``coursekit`` package (no checkpoints), ``pyproject.toml``, ``environment.txt``, the graded
-  test files of the chosen exercises, the hidden tests (``hidden/``) and ``autograder.json``
-  (exercises and limits). No ``solutions/``.
+- the ``coursekit`` package (no checkpoints; on ``PYTHONPATH``, not installed), ``pyproject.toml``,
+  ``requirements-grading.txt``, the graded test files of the chosen exercises, the hidden tests
+  (``hidden/``) and ``autograder.json`` (exercises, limits, image). No ``solutions/``.
 
 ``AUTOGRADER_ROOT`` (default ``/autograder``) and ``COURSEKIT_PYTHON`` (default the venv's
 python) override the paths, so a test can run ``run_autograder`` against a simulated tree.
@@ -29,28 +31,40 @@ from pathlib import Path
 from coursekit.atomic import atomic_path, atomic_write_text
 from coursekit.grading.exercises import EXERCISES, get_exercise, repo_root
 from coursekit.grading.report import load_hidden_tests
+from coursekit.grading.requirements import REQUIREMENTS_FILE, check_hidden_imports, read_requirements
 from coursekit.grading.sandbox import Limits
 
-SETUP = """#!/usr/bin/env bash
-# Gradescope image build (Ubuntu, root): bubblewrap, Python >= 3.11 and the pinned environment.
+IMAGE = {"os": "Ubuntu 22.04", "python": "3.11"}
+"""The image the zip is written for: Gradescope's default base image (Ubuntu 22.04, whose own
+python3 is 3.10) with Ubuntu's python3.11 package; where the image's python3 is already >= 3.11
+(the Ubuntu 24.04 image: 3.12) setup.sh uses that instead."""
+TORCH_CPU_INDEX = "https://download.pytorch.org/whl/cpu"
+"""Where setup.sh finds ``torch==<version>+cpu`` (PyPI has only the CUDA build for Linux)."""
+
+SETUP = f"""#!/usr/bin/env bash
+# Gradescope image build, as root. Written for {IMAGE["os"]} (Gradescope's default base image)
+# and Python {IMAGE["python"]}: bubblewrap, Python and ONLY {REQUIREMENTS_FILE} (torch's CPU build,
+# numpy, pytest and what grading imports; no notebooks, browsers or simulators).
 set -euo pipefail
 export DEBIAN_FRONTEND=noninteractive
 apt-get update -qq
 apt-get install -y -qq bubblewrap python3 python3-venv python3-pip >/dev/null
 PY=""
-for candidate in python3.13 python3.12 python3.11 python3; do
+for candidate in python{IMAGE["python"]} python3; do
   if command -v "$candidate" >/dev/null && "$candidate" -c 'import sys; sys.exit(sys.version_info < (3, 11))'; then
     PY="$candidate"; break
   fi
 done
 if [ -z "$PY" ]; then
-  apt-get install -y -qq python3.11 python3.11-venv >/dev/null
-  PY=python3.11
+  apt-get install -y -qq python{IMAGE["python"]} python{IMAGE["python"]}-venv >/dev/null
+  PY=python{IMAGE["python"]}
 fi
 cd /autograder/source
 "$PY" -m venv .venv
 .venv/bin/python -m pip install -q --upgrade pip
-.venv/bin/python -m pip install -q -r environment.txt
+# --no-deps: the file pins every package the grader needs; the CPU index serves torch's +cpu build
+.venv/bin/python -m pip install -q --no-deps --extra-index-url {TORCH_CPU_INDEX} -r {REQUIREMENTS_FILE}
+.venv/bin/python -m pip check
 """
 
 RUN = """#!/usr/bin/env bash
@@ -88,10 +102,13 @@ def write_autograder(zip_path: str | Path, exercises: list[str] | None = None, h
         raise FileNotFoundError(f"folder {str(zip_path.parent)!r} does not exist")
     chosen = [get_exercise(e) for e in exercises] if exercises else list(EXERCISES)
     hidden = load_hidden_tests(hidden_tests).sources if hidden_tests is not None else {}
-    limits = limits or Limits()
     root = repo_root()
+    if hidden_tests is not None:  # load_hidden_tests checked the files are UTF-8 Python
+        check_hidden_imports(hidden_tests, read_requirements(root / REQUIREMENTS_FILE))
+    limits = limits or Limits()
     config = {"exercises": [e.id for e in chosen],
-              "limits": {k: getattr(limits, k) for k in ("timeout_s", "test_timeout_s", "memory_mb", "output_mb", "disk_mb")}}
+              "limits": {k: getattr(limits, k) for k in ("timeout_s", "test_timeout_s", "memory_mb", "output_mb", "disk_mb")},
+              "image": IMAGE}
     with atomic_path(zip_path, suffix=".zip", lock=lock) as tmp, \
             zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as zf:
         def add_text(name: str, text: str, executable: bool = False) -> None:
@@ -103,7 +120,7 @@ def write_autograder(zip_path: str | Path, exercises: list[str] | None = None, h
         add_text("setup.sh", SETUP, executable=True)
         add_text("run_autograder", RUN, executable=True)
         add_text("autograder.json", json.dumps(config, indent=1) + "\n")
-        for name in ("pyproject.toml", "environment.txt"):
+        for name in ("pyproject.toml", REQUIREMENTS_FILE):
             add_text(name, (root / name).read_text())
         for path, rel in _package_files(root / "coursekit"):
             zf.write(path, f"coursekit/{rel.as_posix()}")
