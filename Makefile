@@ -62,7 +62,7 @@ sandbox:
 
 ## Test workers (pytest-xdist): two, one per core of the course's reference laptop; JOBS=1 runs serially.
 JOBS ?= 2
-XDIST := $(if $(filter 1,$(JOBS)),,-n $(JOBS) --dist loadgroup)
+XDIST := $(if $(filter 1,$(JOBS)),,-n $(JOBS) --dist loadscope --no-loadscope-reorder)
 
 ## The whole suite: library, exercises (both implementations), grader, notebooks, browser.
 test: setup browser sandbox
