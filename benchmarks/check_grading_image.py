@@ -31,7 +31,7 @@ from pathlib import Path
 from benchmarks.results import record
 from coursekit.grading.exercises import EXERCISES, repo_root
 from coursekit.grading.gradescope import IMAGE, write_autograder
-from coursekit.grading.requirements import REQUIREMENTS_FILE
+from coursekit.grading.gradescope import REQUIREMENTS_FILE
 
 COMMAND = ".venv/bin/python -m benchmarks.check_grading_image"
 SECTION = "Grading"

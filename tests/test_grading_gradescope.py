@@ -16,7 +16,7 @@ import pytest
 
 from coursekit.cli import main
 from coursekit.grading.exercises import get_exercise, repo_root
-from coursekit.grading.requirements import REQUIREMENTS_FILE, read_requirements
+from coursekit.grading.gradescope import REQUIREMENTS_FILE, read_requirements
 
 pytestmark = pytest.mark.slow  # two grading runs: ~10-30 s
 

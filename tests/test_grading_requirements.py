@@ -25,7 +25,7 @@ from packaging.requirements import Requirement
 from coursekit.cli import main
 from coursekit.grading.exercises import EXERCISES, repo_root
 from coursekit.grading.gradescope import IMAGE, SETUP, TORCH_CPU_INDEX, write_autograder
-from coursekit.grading.requirements import (REQUIREMENTS_FILE, imported_modules, normalise, providers,
+from coursekit.grading.gradescope import (REQUIREMENTS_FILE, imported_modules, normalise, providers,
                                             read_requirements, third_party)
 
 ROOT = repo_root()

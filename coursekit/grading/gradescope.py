@@ -5,7 +5,7 @@ writes a zip with, at its root:
 
 - ``setup.sh``: run once when Gradescope builds the image (:data:`IMAGE`, as root): installs
   bubblewrap and Python 3.11, and ONLY ``requirements-grading.txt`` (torch's CPU build, numpy,
-  pytest, tqdm, psutil and what they need; :mod:`coursekit.grading.requirements`) into
+  pytest, tqdm, psutil and what they need; :data:`REQUIREMENTS_FILE`) into
   ``source/.venv``, with ``--no-deps`` so nothing unlisted arrives;
 - ``run_autograder``: run per submission; grades ``/autograder/submission`` with
   ``python -m coursekit.grading.gradescope run`` and writes ``/autograder/results/results.json``;
@@ -20,19 +20,29 @@ python) override the paths, so a test can run ``run_autograder`` against a simul
 from __future__ import annotations
 
 import argparse
+import ast
+import importlib.metadata
 import json
 import os
+import re
 import stat
 import sys
 import tempfile
 import zipfile
+from dataclasses import dataclass
 from pathlib import Path
 
 from coursekit.atomic import atomic_path, atomic_write_text
 from coursekit.grading.exercises import EXERCISES, get_exercise, repo_root
 from coursekit.grading.report import load_hidden_tests
-from coursekit.grading.requirements import REQUIREMENTS_FILE, check_hidden_imports, read_requirements
 from coursekit.grading.sandbox import Limits
+
+REQUIREMENTS_FILE = "requirements-grading.txt"
+"""What the image installs, at the repository's root and at the zip's root: torch (the CPU build),
+numpy, pytest, tqdm and psutil, each pinned to ``environment.txt``'s version, plus what those need
+(``# via <package>`` lines), installed with ``pip --no-deps`` so nothing unlisted arrives.
+tests/test_grading_requirements.py holds it to an import scan of the graded path;
+:func:`check_hidden_imports` holds an instructor's hidden tests to it."""
 
 IMAGE = {"os": "Ubuntu 22.04", "python": "3.11"}
 """The image the zip is written for: Gradescope's default base image (Ubuntu 22.04, whose own
@@ -80,6 +90,80 @@ PYTHONPATH="$SRC" COURSEKIT_ROOT="$SRC" OMP_NUM_THREADS=1 exec "$PY" -m courseki
 """
 
 
+# ----------------------------------------------------------------- the image's requirements
+_PIN = re.compile(r"^(?P<name>[A-Za-z0-9][A-Za-z0-9._-]*)==(?P<version>[^\s#;]+)\s*(?:#\s*via\s+(?P<via>\S+))?\s*$")
+
+
+@dataclass(frozen=True)
+class Pin:
+    """One line of the requirements file."""
+
+    name: str
+    """Distribution name, normalised (PEP 503: lower case, runs of ``-_.`` as ``-``)."""
+    version: str
+    """The exact version (``2.13.0+cpu`` for torch's CPU build)."""
+    via: str = ""
+    """The requirement that needs it (``# via torch``); empty for what the graded path imports itself."""
+
+
+def normalise(name: str) -> str:
+    """PEP 503's normal form of a distribution name (``Jinja2`` -> ``jinja2``, ``typing_extensions`` -> ``typing-extensions``)."""
+    return re.sub(r"[-_.]+", "-", name).lower()
+
+
+def read_requirements(path: str | Path) -> list[Pin]:
+    """Every pin of a requirements file; ValueError naming the line for anything but ``name==version [# via X]``."""
+    pins: list[Pin] = []
+    for number, line in enumerate(Path(path).read_text().splitlines(), 1):
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        match = _PIN.match(line.strip())
+        if match is None:
+            raise ValueError(f"{path}:{number}: {line.strip()!r} is not 'name==version' (optionally '# via <package>')")
+        pins.append(Pin(normalise(match["name"]), match["version"], normalise(match["via"] or "")))
+    names = [p.name for p in pins]
+    if len(set(names)) != len(names):
+        raise ValueError(f"{path}: {sorted({n for n in names if names.count(n) > 1})} pinned more than once")
+    return pins
+
+
+def imported_modules(source: str, filename: str = "<source>") -> set[str]:
+    """Top-level names of every absolute import in ``source``, at any depth (functions included)."""
+    names: set[str] = set()
+    for node in ast.walk(ast.parse(source, filename)):
+        if isinstance(node, ast.Import):
+            names.update(alias.name.split(".")[0] for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            names.add(node.module.split(".")[0])
+    return names
+
+
+def third_party(modules: set[str]) -> set[str]:
+    """``modules`` less the standard library, ``__future__`` and coursekit itself."""
+    return {m for m in modules if m not in sys.stdlib_module_names and m not in ("__future__", "coursekit")}
+
+
+def providers(module: str) -> set[str]:
+    """Normalised names of the installed distributions that provide top-level ``module`` (empty: none here)."""
+    return {normalise(d) for d in importlib.metadata.packages_distributions().get(module, [])}
+
+
+def check_hidden_imports(folder: str | Path, pins: list[Pin]) -> None:
+    """ValueError naming the file and module when a hidden test in ``folder`` (its ``*.py`` but
+    conftest.py, as :func:`coursekit.grading.report.load_hidden_tests` takes them) imports a package
+    the image lacks."""
+    installed, direct = {p.name for p in pins}, sorted(p.name for p in pins if not p.via)
+    for path in sorted(Path(folder).glob("*.py")):
+        if path.name == "conftest.py":
+            continue
+        for module in sorted(third_party(imported_modules(path.read_text(encoding="utf-8"), str(path)))):
+            if not providers(module) & installed:
+                raise ValueError(f"hidden test {path} imports {module!r}, which the autograder image does not install "
+                                 f"(it holds {', '.join(direct)} and what they need): add its pin to {REQUIREMENTS_FILE} "
+                                 "or drop the import")
+
+
+# ----------------------------------------------------------------- the zip
 def _package_files(package: Path):
     for path in sorted(package.rglob("*")):
         rel = path.relative_to(package)
