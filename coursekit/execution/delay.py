@@ -213,11 +213,11 @@ class AsyncChunking(DelayedExecutor):
     actions, meant for steps r .. r + d - 1, are already in the past: execution starts at its
     action for step r + d. d = 0 is exactly RecedingHorizon.
 
-    Why this is exercise 11.1 (and not RTC's inpainting step): every strategy of the chapter,
-    real-time chunking included, runs on this schedule, and the delay is nothing but this
-    bookkeeping (which chunk, which index, from which observation); it is exact integer logic a
-    hand-built chunk stream checks step by step, where the guidance step is a few lines whose
-    effect shows only through a trained network.
+    Why this is exercise 11.1: every strategy of the chapter, real-time chunking included, runs
+    on this schedule, and the delay is nothing but this bookkeeping (which chunk, which index,
+    from which observation); it is exact integer logic a hand-built chunk stream checks step by
+    step. RTC's own step (its weights and guided update) is exercise 11.2, in
+    :mod:`coursekit.execution.rtc`.
     """
 
     @property

@@ -44,8 +44,10 @@ their velocity is -v, and (1 - tau) / (tau r^2) with r^2 = (1 - tau)^2 / (tau^2 
 becomes the weight above; at t = 1 it is infinite and the clip takes over).
 
 This module holds all of RTC that does not depend on a network: the weights, the two guidance
-weights, the VJP, the sampling loop over a :class:`GuidedHead`, the executor, and the chapter's
-strategies by name. Each iterative policy provides its own head, built on its own sampler step
+weights, the VJP, the guided update, the sampling loop over a :class:`GuidedHead`, the executor,
+and the chapter's strategies by name. The weights (:func:`rtc_weights`), the VJP
+(:func:`guidance_vjp`) and the update (:func:`guided_update`) are exercise "rtc_step" (11.2):
+the library's sampler calls these very functions. Each iterative policy provides its own head, built on its own sampler step
 (``DiffusionPolicy.guided_head``, ``FlowMatchingPolicy.guided_head``), and the shared
 ``predict_inpainted`` (:class:`coursekit.policies.unet_chunk.IterativeUNetPolicy`) runs it.
 
@@ -76,20 +78,32 @@ iterate at every step, at that step's noise level: Diffusion Policy's inpainting
 
 
 def rtc_weights(n: int, delay: int, overlap: int, schedule: str = "exp") -> np.ndarray:
-    """Guidance weights W (n,) over the steps r .. r + n - 1 of the next chunk.
+    """Guidance weights W (n,) over the steps r .. r + n - 1 of the next chunk (RTC paper, eq. 5).
+
+    For j = 0 .. n - 1 (step r + j)::
+
+        W_j = 1                                   j < d        (frozen: already committed)
+        W_j = c_j (e^c_j - 1) / (e - 1)           d <= j < L   (soft, "exp" only; 0 for "hard")
+              with c_j = (L - j) / (L - d + 1)                  (decays from ~1 at j = d to ~0)
+        W_j = 0                                   j >= L       (free: the previous chunk has ended)
 
     Args:
         n: number of weights (target steps).
         delay: d, steps frozen to the committed actions (W = 1).
-        overlap: L, steps the previous chunk still covers from r (the soft region is d <= j < L).
+        overlap: L, steps the previous chunk still covers from r (the soft region is d <= j < L;
+            empty when L <= d).
         schedule: "exp" (RTC's exponential decay) or "hard" (frozen prefix only; the ablation
             the paper says jumps at the switch).
+
+    Returns:
+        W, a float64 numpy array of shape (n,).
     """
     for name, v in (("n", n), ("delay", delay), ("overlap", overlap)):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
             raise ValueError(f"{name} must be an integer >= 0, got {v!r}")
     if schedule not in WEIGHT_SCHEDULES:
         raise ValueError(f"schedule must be one of {WEIGHT_SCHEDULES}, got {schedule!r}")
+    # BEGIN SOLUTION
     w = np.zeros(n)
     j = np.arange(n)
     w[j < delay] = 1.0
@@ -97,23 +111,64 @@ def rtc_weights(n: int, delay: int, overlap: int, schedule: str = "exp") -> np.n
         soft = (j >= delay) & (j < overlap)
         c = (overlap - j[soft]) / (overlap - delay + 1.0)
         w[soft] = c * np.expm1(c) / (math.e - 1.0)
+    # END SOLUTION
     return w
 
 
 def guidance_vjp(clean_fn: Callable[[Any], tuple[Any, Any]], x: Any, target: Any, weights: Any) -> tuple[Any, Any, Any]:
-    """x0_hat, the model's output, and g = (d x0_hat / d x)^T [W (Y - x0_hat)], all (B, Tp, Da).
+    """x0_hat, the model's output, and the guidance g = (d x0_hat / d x)^T [W (Y - x0_hat)], all (B, Tp, Da).
 
-    ``clean_fn(x) -> (x0_hat, model_output)`` must be differentiable in x; ``target`` Y (B, Tp, Da)
-    and ``weights`` W (Tp,) (zero where there is no target). Returns detached tensors.
+    The weighted error e = W (Y - x0_hat) (W_j multiplies row j of every sample, every action
+    dimension) is how far the clean estimate is from the previous chunk where it matters; g is e
+    carried back through the network to the iterate: the vector-Jacobian product J^T e (one
+    backward pass, ``torch.autograd.grad`` with ``grad_outputs=e``; never the Jacobian itself).
+    g is the direction in x that brings x0_hat toward Y (the gradient of -1/2 sum_j W_j
+    |Y_j - x0_hat_j|^2 with W held fixed): a small step x + eps g moves x0_hat toward Y.
+
+    Args:
+        clean_fn: ``clean_fn(x) -> (x0_hat, model_output)``, each (B, Tp, Da), differentiable in x.
+        x: the iterate (B, Tp, Da).
+        target: Y (B, Tp, Da), the previous chunk's actions (anything where W = 0).
+        weights: W (Tp,) (zero where there is no target).
+
+    Returns:
+        (x0_hat, model_output, g), detached tensors of shape (B, Tp, Da).
     """
     import torch
 
     with torch.enable_grad():
         x = x.detach().requires_grad_(True)
         x0_hat, out = clean_fn(x)
+        # BEGIN SOLUTION
         err = (target - x0_hat.detach()) * weights.view(1, -1, 1)  # (B, Tp, Da), W (Y - x0_hat)
         (g,) = torch.autograd.grad(x0_hat, x, grad_outputs=err)  # J^T err, one backward pass
+        # END SOLUTION
     return x0_hat.detach(), out.detach(), g
+
+
+def guided_update(out: Any, g: Any, scale: float) -> Any:
+    """One guided update of the model's output: out' = out - scale * g, (B, Tp, Da).
+
+    ``out`` is what the network predicted at this step (flow: the velocity v; diffusion: the
+    noise eps), ``g`` the guidance of :func:`guidance_vjp` and ``scale`` >= 0 the sampler's
+    guidance weight (:func:`velocity_guidance_weight`, :func:`epsilon_guidance_scale`). The sign:
+    both v and eps point from the data toward the noise (x0_hat = x_t - t v; x0_hat = (x_t -
+    sqrt(1 - abar) eps) / sqrt(abar)), and the sampler steps AGAINST them (Euler's dt = -1/N), so
+    taking scale * g off the output moves the next iterate along +g, toward the previous chunk
+    (RTC's Algorithm 1, where the velocity points the other way, adds it instead). The sampler
+    then takes its own step with out'.
+
+    Args:
+        out: the model output (B, Tp, Da).
+        g: the guidance (B, Tp, Da).
+        scale: the guidance weight, a float >= 0 (already clipped at beta).
+
+    Returns:
+        out' (B, Tp, Da).
+    """
+    # BEGIN SOLUTION
+    return out - scale * g
+    # END SOLUTION
 
 
 def epsilon_guidance_scale(abar: float, max_guidance: float) -> float:
@@ -139,8 +194,12 @@ class GuidedHead(Protocol):
     def clean(self, x: Any, k: int) -> tuple[Any, Any]:
         """Step k: the clean-chunk estimate x0_hat(x) (B, Tp, Da) and the model output (eps or v)."""
 
+    def guidance_scale(self, k: int, max_guidance: float) -> float:
+        """Step k: the weight of g in :func:`guided_update` (clipped at ``max_guidance``)."""
+
     def step(self, x: Any, k: int, model_out: Any, g: Any, max_guidance: float) -> Any:
-        """Step k: the next iterate from x, the model output and the guidance VJP g (zero: unguided)."""
+        """Step k: the next iterate from x and the model output, guided by the VJP g when given:
+        the sampler's own step on ``guided_update(model_out, g, self.guidance_scale(k, max_guidance))``."""
 
     def noised(self, clean: Any, noise: Any, k: int) -> Any:
         """A clean chunk carried to the noise level after step k along ``noise`` (for ``replace``)."""

@@ -234,6 +234,33 @@ EXERCISES: tuple[Exercise, ...] = (
             "test_batch_rows_and_start_offset": (1, "Return self._emit(action, ...) with action (B, Da) = the current chunk's column for step t."),
         },
     ),
+    Exercise(
+        id="rtc_step",
+        chapter=11,
+        title="Real-time chunking's step: the soft-mask weights and one guided update",
+        source="coursekit.execution.rtc",
+        objects=("rtc_weights", "guidance_vjp", "guided_update"),
+        tests={
+            "test_weights_shape_and_frozen_prefix": (1, "Return W as a float array of shape (n,) with W_j = 1 for the d frozen steps j < d."),
+            "test_soft_weights_decay_exponentially": (3, "W_j for d <= j < L decays: W_j = c_j (e^c_j - 1) / (e - 1) with c_j = (L - j) / (L - d + 1), "
+                                                         "about 1 at j = d and near 0 at j = L - 1; not a constant, not a straight line."),
+            "test_weights_zero_past_the_overlap": (1, "W_j = 0 for j >= L (the previous chunk has ended); with L <= d only the frozen prefix is 1."),
+            "test_hard_schedule_freezes_only": (1, "schedule 'hard': W_j = 1 for j < d and 0 everywhere else (no soft region)."),
+            "test_vjp_is_jacobian_transpose_times_weighted_error": (3, "g = J^T e with e = W (Y - x0_hat) and J = d x0_hat / d x: "
+                                                                       "torch.autograd.grad(x0_hat, x, grad_outputs=e)."),
+            "test_vjp_weights_each_step_of_the_error": (1, "Weight the ERROR before the VJP: e[:, j, :] = W_j (Y - x0_hat)[:, j, :] "
+                                                          "(weights.view(1, -1, 1)); not g afterwards, not W over the action dimension."),
+            "test_vjp_pulls_toward_the_previous_chunk": (2, "g must point where x0_hat gets closer to Y: a small step x + eps g lowers sum_j W_j |Y_j - x0_hat_j|^2; "
+                                                           "the error is Y - x0_hat.",
+                                                        {"value": "The guidance has the wrong sign (or none): it must pull x0_hat toward the previous "
+                                                                  "chunk Y, and yours pushes it away or not at all. The error is Y - x0_hat, not x0_hat - Y."}),
+            "test_update_closed_form": (1, "out' = out - scale * g, the same shape as out."),
+            "test_update_pulls_toward_the_previous_chunk": (2, "v and eps point toward the noise and the sampler steps against them: "
+                                                              "out' = out - scale * g moves the next iterate along +g, toward Y.",
+                                                           {"value": "The guided update has the wrong sign: out + scale * g pushes the chunk away "
+                                                                     "from the previous chunk Y; take it off: out' = out - scale * g."}),
+        },
+    ),
 )
 
 

@@ -9,7 +9,8 @@ data (:mod:`coursekit.grading.codec`); every comparison happens in the trusted p
 Before the student's module is imported the worker applies its resource limits and replaces
 the library's own implementation of the graded exercise (and any import of ``solutions``) by
 something that raises :class:`ReferenceCalled`, so a submission cannot hand in the reference.
-:func:`scale_model` is a stand-in network the graded tests build here (``sandbox.new``).
+:func:`scale_model` and :func:`toy_clean_estimate` are stand-in networks the graded tests build
+here (``sandbox.new``).
 """
 
 from __future__ import annotations
@@ -111,6 +112,24 @@ def scale_model(w: float):
             return self.w * x
 
     return Scale()
+
+
+def toy_clean_estimate(matrix: Any, t: float):
+    """A stand-in guided head's ``clean`` for real-time chunking (exercise 11.2): x (B, T, D) ->
+    (x0_hat, v), v = tanh(x.reshape(B, T D) @ matrix.T).reshape(B, T, D) (a "velocity" mixing every
+    step and action dimension) and x0_hat = x - t v (flow's clean estimate). ``matrix`` (T D, T D).
+    Built here (``sandbox.new("coursekit.grading.worker:toy_clean_estimate", M, 0.6)``) so the
+    student's autograd runs through it; the graded test calls the same function for the reference."""
+    import torch
+
+    m = torch.as_tensor(matrix)
+    t = float(t)
+
+    def clean(x: torch.Tensor):
+        v = torch.tanh(x.reshape(x.shape[0], -1) @ m.to(x.dtype).T).reshape(x.shape)
+        return x - t * v, v
+
+    return clean
 
 
 class Worker:

@@ -41,7 +41,7 @@ import torch
 from coursekit.diffusion.loss import diffusion_loss, epsilon_loss, q_sample
 from coursekit.diffusion.samplers import TIMESTEP_SPACINGS, DDIMSampler, DDPMSampler, EpsModel, predict_x0
 from coursekit.diffusion.schedules import NoiseSchedule
-from coursekit.execution.rtc import epsilon_guidance_scale
+from coursekit.execution.rtc import epsilon_guidance_scale, guided_update
 from coursekit.policies.base import Normalizer
 from coursekit.policies.unet_chunk import IterativeUNetPolicy, UNetChunkConfig
 
@@ -91,8 +91,9 @@ class DenoisingHead:
     """A diffusion sampler (DDIM or DDPM) one step at a time, guided on epsilon (real-time chunking).
 
     ``clean``: the network's eps and x0_hat = ``predict_x0`` (unclipped: the clamp has no gradient);
-    ``step``: the sampler's own step on eps' = eps - ``epsilon_guidance_scale`` * g; ``noised``:
-    ``q_sample`` to the noise level the step's output x_prev is at (clean past the last step).
+    ``step``: the sampler's own step on eps' = ``guided_update(eps, g, epsilon_guidance_scale(abar_t,
+    beta))`` = eps - scale * g; ``noised``: ``q_sample`` to the noise level the step's output x_prev
+    is at (clean past the last step).
     """
 
     def __init__(self, eps_model: EpsModel, sampler: DDIMSampler | DDPMSampler, cond: torch.Tensor,
@@ -107,11 +108,15 @@ class DenoisingHead:
         eps = self.eps_model(x, torch.full((x.shape[0],), t, dtype=torch.long, device=x.device), self.cond)
         return predict_x0(eps, x, self.sampler.schedule.alphas_cumprod[t]), eps
 
+    def guidance_scale(self, k: int, max_guidance: float) -> float:
+        """Step k: the factor of g taken off eps, sqrt(abar_t) min(beta, 1 / sqrt(abar_t (1 - abar_t)))."""
+        return epsilon_guidance_scale(float(self.sampler.schedule.alphas_cumprod[self.timesteps[k]]), max_guidance)
+
     def step(self, x: torch.Tensor, k: int, eps: torch.Tensor, g: torch.Tensor | None, max_guidance: float) -> torch.Tensor:
         """Step k: x_prev from x with the guided eps (g None: the plain sampler step)."""
         t = self.timesteps[k]
         if g is not None:
-            eps = eps - epsilon_guidance_scale(float(self.sampler.schedule.alphas_cumprod[t]), max_guidance) * g
+            eps = guided_update(eps, g, self.guidance_scale(k, max_guidance))
         return self.sampler.step(eps, t, x, generator=self.generator)
 
     def noised(self, clean: torch.Tensor, noise: torch.Tensor, k: int) -> torch.Tensor:

@@ -30,7 +30,7 @@ from typing import Any, Callable
 
 import torch
 
-from coursekit.execution.rtc import velocity_guidance_weight
+from coursekit.execution.rtc import guided_update, velocity_guidance_weight
 from coursekit.flow.loss import TIME_SAMPLINGS, flow_loss, flow_matching_loss
 from coursekit.flow.sampler import METHODS, VelocityModel, euler_step, integrate, time_grid
 from coursekit.policies.unet_chunk import IterativeUNetPolicy, UNetChunkConfig
@@ -75,7 +75,8 @@ class EulerHead:
     """Euler integration (t = 1 noise -> t = 0 data) one step at a time, guided on velocity (real-time chunking).
 
     ``clean``: the network's v and x0_hat = x_t - t v; ``step``: ``euler_step`` with the guided
-    velocity v' = v - ``velocity_guidance_weight`` * g over the grid ``time_grid(steps)``;
+    velocity v' = ``guided_update(v, g, velocity_guidance_weight(t, beta))`` = v - weight * g over
+    the grid ``time_grid(steps)``;
     ``noised``: the straight path's point t_next e + (1 - t_next) a0 after the step.
     """
 
@@ -90,11 +91,15 @@ class EulerHead:
         v = self.velocity(x, torch.full((x.shape[0],), t, dtype=x.dtype, device=x.device), self.cond)
         return x - t * v, v
 
+    def guidance_scale(self, k: int, max_guidance: float) -> float:
+        """Step k: RTC's weight of g at t_k, min(beta, ((1 - t)^2 + t^2) / ((1 - t) t))."""
+        return velocity_guidance_weight(self.grid[k], max_guidance)
+
     def step(self, x: torch.Tensor, k: int, v: torch.Tensor, g: torch.Tensor | None, max_guidance: float) -> torch.Tensor:
         """Step k: x at t_{k+1} from x at t_k with the guided velocity (g None: the plain Euler step)."""
         t, t_next = self.grid[k], self.grid[k + 1]
         if g is not None:
-            v = v - velocity_guidance_weight(t, max_guidance) * g
+            v = guided_update(v, g, self.guidance_scale(k, max_guidance))
         return euler_step(lambda *_: v, x, t, t_next - t, self.cond)  # v is already evaluated at (x, t)
 
     def noised(self, clean: torch.Tensor, noise: torch.Tensor, k: int) -> torch.Tensor:
