@@ -63,7 +63,7 @@ NEVER_MEASURED_AFTER = re.compile(r"\s?(?:M\b|m\b|ms per (?:control )?step|ms pe
 """Context after a number that makes it a parameter count (4.5 M), a length (0.8 m) or a control period."""
 NEVER_MEASURED_BEFORE = re.compile(
     r"(?:[=<>\u2264\u2265\u2248~\u00b1]|[Ee]xercises?|[Ss]ections?|\u00a7|[Cc]hapters?|[Ss]ec\.|[Ee]q\.|"
-    r"Table|Fig\.|Figure|Python|[Vv]ersion|lerobot|MuJoCo|torch|ch\.)\s*$")
+    r"Table|Fig\.|Figure|Python|Ubuntu|[Vv]ersion|lerobot|MuJoCo|torch|ch\.)\s*$")
 """Context before a decimal that makes it a name, a version or a set value, not a measurement."""
 CANDIDATES = [  # (what it looks like, pattern): each match outside a tag's figure needs a tag
     ("a percentage", re.compile(rf"(?<![\w.]){NUM}\s?%(?!\s*(?:t-)?(?:interval|confidence|CI|Wilson|bootstrap))")),
