@@ -10,7 +10,7 @@ Moving d redraws, in place, what each strategy of :mod:`coursekit.execution.dela
 
 - synchronous: flat steps while it waits (it falls behind the on-time line, one unit per step)
   and NO jump: the new chunk was planned from where the robot stands;
-- naive async: on time, but a jump at each switch: the new chunk was planned from where the
+- naive async: never waits, but jumps at each switch: the new chunk was planned from where the
   robot was d steps earlier, and the robot has since moved at the old chunk's speed, so its
   first executed action lands about 2 d s away from the old course;
 - ensemble (m = 0): the average of the arrived chunks covering each step. Once 2 d >= Tp a
@@ -87,17 +87,18 @@ def delay_scrubber(max_delay: int = 8, steps: int = 24, horizon: int = 12, n_act
         t = np.arange(steps)
         for ax, name in zip(axes, ("synchronous", "naive async", "ensemble")):
             acts, switches = play_delay(name, d, steps, horizon, n_action_steps, spread)
-            ax.plot(t, t + 1.0, color="0.7", lw=1, label="on time: 1 per step")
+            ax.plot(t, t + 1.0, color="0.7", lw=1, label="1 per step (on time)")
             ax.step(t, acts, where="post", color="C0", label="executed")
             for s in switches[1:]:
                 ax.axvline(s, color="C3", lw=0.6, ls=":")
             step = np.diff(np.concatenate([[0.0], acts]))  # (steps,) what each step moved
-            ax.set(title=f"{name}\nlargest step {np.abs(step).max():.2f}, {int((step == 0).sum())} held, "
-                         f"ends at {acts[-1]:.1f} (on time: {steps})", xlabel="control step t")
+            held = int((step == 0).sum())
+            ax.set(title=f"{name}\nlargest step {np.abs(step).max():.2f}, {held} step{'' if held == 1 else 's'} held\n"
+                         f"ends at {acts[-1]:.1f} (1 per step: {steps:d})", xlabel="control step t")
             ax.title.set_fontsize(9)
         axes[0].set_ylabel("position (= last action)")
         axes[0].legend(fontsize=8, loc="upper left")
         fig.suptitle(f"Ta = {n_action_steps}, Tp = {horizon}, d = {d}, chunk speeds {1 + spread:g} / {1 - spread:g} in turn: "
                      "red dotted lines = a new chunk takes over", fontsize=9)
 
-    return FigureScrubber(draw, {"d": slider}, figsize=(9.5, 3.4))
+    return FigureScrubber(draw, {"d": slider}, figsize=(9.5, 3.9))
