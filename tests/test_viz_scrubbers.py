@@ -122,13 +122,25 @@ def test_delay_scrubber_follows_the_delayed_executors():
     async0, _ = play_delay("naive async", 0, steps=12)
     np.testing.assert_array_equal(sync0, async0)
     assert sw0 == [0, 4, 8]
-    # chunk k from step r says r + j + (-1)^k 0.5: chunk 0 plays 0.5, 1.5, 2.5, 3.5, then at d = 2 ...
-    sync2, sw_sync = play_delay("synchronous", 2, steps=10)
-    np.testing.assert_allclose(sync2, [0.5, 1.5, 2.5, 3.5, 3.5, 3.5, 3.5, 4.5, 5.5, 6.5])  # holds 2 steps, lags
+    # chunk k, planned from the position p the robot is at, says p + (j + 1)(1 +- 0.25), the speed
+    # alternating: chunk 0 plays 1.25 .. 5.0; at d = 2 the synchronous robot holds 5.0 for two steps and
+    # plays chunk 1 (speed 0.75, planned from 5.0) from its start: it loses time and never jumps
+    sync2, sw_sync = play_delay("synchronous", 2, steps=12)
+    np.testing.assert_allclose(sync2, [1.25, 2.5, 3.75, 5.0, 5.0, 5.0, 5.75, 6.5, 7.25, 8.0, 8.0, 8.0])
     assert sw_sync == [0, 6]
-    async2, sw_async = play_delay("naive async", 2, steps=8)
-    np.testing.assert_allclose(async2, [0.5, 1.5, 2.5, 3.5, 4.5, 5.5, 5.5, 6.5])  # no pause; chunk 1 from t = 6
-    assert sw_async == [0, 6]
+    # naive async keeps moving on chunk 0 (6.25, 7.5); chunk 1, requested at step 4 from 5.0, takes
+    # over at step 6 with its index 2, 5 + 3 * 0.75 = 7.25: a step back; chunk 2 (from 8.0, speed 1.25)
+    # at step 10 with its index 2, 8 + 3 * 1.25 = 11.75: a step of 2.25 where a step is 0.75
+    async2, sw_async = play_delay("naive async", 2, steps=11)
+    np.testing.assert_allclose(async2, [1.25, 2.5, 3.75, 5.0, 6.25, 7.5, 7.25, 8.0, 8.75, 9.5, 11.75])
+    assert sw_async == [0, 6, 10]
+    for d in range(9):  # whatever d, the synchronous robot's largest step is its fast chunk's own, 1.25
+        assert np.abs(np.diff(np.r_[0.0, play_delay("synchronous", d)[0]])).max() == pytest.approx(1.25)
+    # once 2 d >= Tp = 12 a chunk has run out when the next one arrives: the ensemble averages one
+    # chunk at a time and plays exactly what naive async plays (chapter 11 says so); not before
+    for d in (6, 8):
+        np.testing.assert_array_equal(play_delay("ensemble", d)[0], play_delay("naive async", d)[0])
+    assert not np.allclose(play_delay("ensemble", 5)[0], play_delay("naive async", 5)[0])
     s = delay_scrubber(max_delay=6)
     first = bytes(s.image.value)
     s.controls["d"].value = 5

@@ -183,8 +183,10 @@ class Synchronous(DelayedExecutor):
     """Receding horizon with a pause: after Ta actions the robot holds its last action for d steps.
 
     The chunk requested at the boundary is then executed from its first action (index start),
-    as if no time had passed: the robot did not move while the policy was thinking (the world
-    may have: PushT's block keeps sliding). d = 0 is exactly RecedingHorizon.
+    as if no time had passed: the robot did not move while the policy was thinking. On PushT
+    nothing else did either: the block has no momentum (``space.damping = 0`` in
+    coursekit/envs/pusht.py, so it moves only while pushed) and the pause costs only time; on a
+    dynamic task the world would move on meanwhile. d = 0 is exactly RecedingHorizon.
     """
 
     def reset(self, obs: Any) -> None:

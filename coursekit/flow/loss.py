@@ -9,6 +9,11 @@ and the network regresses that velocity (Lipman et al. 2023, eq. 23; Liu et al. 
 
     loss = E_{t, e} || v_theta(x_t, t, o) - u ||^2
 
+Both cited papers run time THE OTHER WAY: their t = 0 is noise and t = 1 data, with
+x_t = t a0 + (1 - t) e (Lipman et al. with sigma_min = 0) and target a0 - e. Their t is 1 - t
+here and their velocity is minus this one: the same straight paths and the same minimiser,
+travelled in the opposite direction (hence dt = -1/N in ``coursekit/flow/sampler.py``).
+
 The minimiser is the conditional expectation E[e - a0 | x_t, o]: averaged over every (a0, e)
 pair whose path passes through x_t. At t = 1 that is E[e - a0 | e, o] = e - E[a0 | o], so ONE
 Euler step of length 1 from noise lands on the conditional mean E[a0 | o] -- the regression

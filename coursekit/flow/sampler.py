@@ -11,8 +11,11 @@ With N steps the time grid is t_i = 1 - i / N, i = 0..N, and every step has dt =
 
 Global error after integrating to t = 0 is O(1/N) for Euler and O(1/N^2) for midpoint on a
 smooth field (tests/test_flow_sampler.py checks both orders on a linear field). With the exact
-velocity of a straight path one Euler step is already exact; a learned flow's paths curve
-where the data has several modes, which is what extra steps are for.
+velocity of a straight path one Euler step is already exact. But the field a network learns is
+the MARGINAL one, the average of e - a0 over every pair whose path passes through (x, t)
+(coursekit/flow/loss.py), and its paths curve whenever p(a0 | o) is not a single point: one
+mode with any spread is enough (Gaussian data of std s > 0 already bends them), several modes
+bend them more. One step lands on E[a0 | o]; extra steps follow the curve.
 
 ``euler_step`` is exercise "euler_step" (10.2); ``integrate`` takes the step function as an
 argument, so a student's step plugs straight into the policy's sampler.

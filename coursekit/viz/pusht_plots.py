@@ -194,7 +194,7 @@ def plot_coverage(coverages, labels: Sequence[str] | None = None, ax: Axes | Non
     ax.set_xlabel(f"env step ({PUSHT.control_hz:g} Hz)")
     ax.set_ylabel("coverage of the goal T")
     ax.set_ylim(0, 1.02)
-    ax.legend(fontsize=7, loc="lower right")
+    ax.legend(fontsize=8, loc="lower right")
     return fig
 
 
@@ -240,7 +240,7 @@ def plot_trajectories(paths, scene_state=None, colors: Sequence | None = None,
         (line,) = ax.plot(p[:, 0], p[:, 1], lw=1.2, alpha=0.8, color=color, label=label, zorder=3)
         ax.plot(p[-1, 0], p[-1, 1], "o", ms=3, color=line.get_color(), zorder=3)
     if labels is not None:
-        ax.legend(fontsize=7, loc="upper right")
+        ax.legend(fontsize=8, loc="upper right")
     return fig
 
 

@@ -120,7 +120,7 @@ def draw_chunk_step(ax: Any, run: ChunkRollout, t: int) -> None:
     ax.plot(*chunk[now], "x", color="k", ms=10, mew=2, label="target now")
     obs = run.states[max(0, t0 - to + 1): t0 + 1, :2]
     ax.plot(obs[:, 0], obs[:, 1], "s", color="tab:green", ms=6, label=f"To = {to} observed")
-    ax.legend(fontsize=6, loc="lower left")
+    ax.legend(fontsize=8, loc="lower left")
 
 
 def chunk_replay(runs: dict[int, ChunkRollout]) -> FigureScrubber:
@@ -142,7 +142,7 @@ def chunk_replay(runs: dict[int, ChunkRollout]) -> FigureScrubber:
         ax_time.set(xlim=(-1, longest), ylim=(0, 1), yticks=[], xlabel="control step")
         ax_time.set_title(f"Ta = {ta}: {len(run.made_at)} network calls in {n} steps\nmax reward {run.max_reward:.2f}",
                           fontsize=9)
-        ax_time.legend(fontsize=7, loc="upper right")
+        ax_time.legend(fontsize=8, loc="upper right")
 
     controls = {
         "ta": widgets.Dropdown(options=tas, value=tas[-1], description="Ta"),

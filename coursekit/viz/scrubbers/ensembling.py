@@ -57,7 +57,7 @@ def ensemble_scrubber(chunks: np.ndarray, joint: int, joint_name: str = "", ever
         executed = ensemble_actions(chunks, m, newest_first)[:, joint]
         ax.plot(executed, "k", lw=2, label=f"executed, m = {m:.3g} ({'newest' if newest_first else 'oldest'} first)")
         ax.set(xlabel="control step", ylabel=name, xlim=(0, T + k), title=f"temporal ensembling of k = {k} chunks: {name}")
-        ax.legend(fontsize=7, loc="upper right")
+        ax.legend(fontsize=8, loc="upper right")
 
     controls = {
         "m": widgets.FloatLogSlider(value=0.01, base=10, min=-3, max=1, step=0.1, description="m",
