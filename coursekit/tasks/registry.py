@@ -42,15 +42,14 @@ def task_names(aliases: bool = False) -> list[str]:
 def task_in_meta(meta: Mapping[str, Any] | None) -> Task | None:
     """The task a dataset's meta names: its "task" (a name) or its "env_id" (a gymnasium id); None if neither."""
     meta = meta or {}
-    for key in ("task", "env_id"):  # meta comes from files a user can edit: a list here is a bad file, not a crash
-        if meta.get(key) is not None and not isinstance(meta[key], str):
-            raise ValueError(f"the dataset's {key!r} is {meta[key]!r}: expected a task name (one of {task_names()})"
-                             if key == "task" else f"the dataset's 'env_id' is {meta[key]!r}: expected a gymnasium id "
-                             f"such as {TASKS[task_names()[0]].gym_id!r}")
+    env_id = meta.get("env_id")  # get_task checks "task"; meta comes from a file a user can edit
+    if env_id is not None and not isinstance(env_id, str):
+        raise ValueError(f"the dataset's 'env_id' is {env_id!r}: expected a gymnasium id such as "
+                         f"{TASKS[task_names()[0]].gym_id!r}")
     if meta.get("task") is not None:
         return get_task(meta["task"])
     by_gym_id = {task.gym_id: task for task in TASKS.values()}
-    return by_gym_id.get(meta.get("env_id"))
+    return by_gym_id.get(env_id)
 
 
 def register_gym_env(task: Task) -> None:
