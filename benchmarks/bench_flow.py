@@ -18,6 +18,13 @@ Run: ``.venv/bin/python -m benchmarks.bench_flow`` (about 10 minutes on one thre
   turns, so that a shared machine's load hits all alike.
 - ``shipped``: the flow checkpoint's own default (Euler-10) on 50 seeds, the row
   ``tests/test_shipped_checkpoints.py`` reproduces through ``coursekit eval``.
+- ``spacing``: chapter 10's question ("can ten steps collapse to one?") on equal terms. The DP
+  checkpoint's own DDIM spacing is diffusers' "leading" one, whose single step queries t = 0 and
+  so returns near-noise (chapter 4): Euler-1 against that DDIM-1 compares a flow head with a
+  handicapped sampler. This part runs DP DDIM-N with "trailing" spacing (N = 1 queries t = 99, the
+  noise level the sampler starts from) and with "leading" spacing for N = 1, 2, 4, 10, on the same
+  seeds and protocol as ``score`` (DDIM-10 leading is the ``score`` part's DP row, evaluated again
+  here so the part stands alone; the evaluation is deterministic, so the two agree).
 
 Both checkpoints were trained on the same 400 demonstrations (seeds 0..399, DART noise 0/5 px,
 keypoint features), recipe ``cpu`` (lr 5e-4, batch 128), training seed 0; their step counts are
@@ -58,16 +65,21 @@ def _weights_hash(checkpoint: Path) -> str:
 
 
 def evaluate_cached(checkpoint: Path, sampler: str, steps: int, seeds: list[int], cache: Path,
-                    reuse: bool = True) -> dict:
-    """Per-episode max reward and success of (checkpoint, sampler, steps) on ``seeds``; cached as JSON."""
+                    reuse: bool = True, spacing: str | None = None) -> dict:
+    """Per-episode max reward and success of (checkpoint, sampler, steps) on ``seeds``; cached as JSON.
+    ``spacing``: a DDIM timestep spacing other than the checkpoint's own ("leading" or "trailing")."""
     key = {"checkpoint": str(checkpoint), "weights": _weights_hash(checkpoint), "sampler": sampler,
            "steps": steps, "seeds": list(seeds)}
+    if spacing is not None:
+        key["spacing"] = spacing
     if reuse and cache.is_file():
         data = json.loads(cache.read_text())
         if all(data.get(k) == v for k, v in key.items()):
             return data
     info = read_checkpoint_info(checkpoint)
     policy = load_checkpoint(checkpoint, device="cpu")
+    if spacing is not None:
+        policy = policy.with_config(ddim_timestep_spacing=spacing)
     t0 = time.perf_counter()
     r = evaluate_pusht(policy, seeds=seeds, sampler=sampler, num_inference_steps=steps,
                        dataset_meta=info.get("dataset"), progress=False)
@@ -193,9 +205,33 @@ def part_shipped(args: argparse.Namespace, rec) -> None:
         interval=(round(score.lo, 3), round(score.hi, 3)), n=score.n, seeds=f"{seeds[0]}-{seeds[-1]}")
 
 
+SPACING_STEPS = (1, 2, 4, 10)
+
+
+def part_spacing(args: argparse.Namespace, rec) -> None:
+    seeds = heldout_seeds(args.episodes)
+    policy = load_checkpoint(CKPT["diffusion"], device="cpu")
+    common = (f"{args.episodes} held-out seeds {seeds[0]}..{seeds[-1]} (the flow rows' seeds), sampling seed 0, 300 steps; "
+              f"the shipped DP checkpoint (trained {training_note(CKPT['diffusion'])}), its DDIM spacing overridden")
+    for spacing in ("trailing", "leading"):
+        for n in SPACING_STEPS:
+            d = evaluate_cached(CKPT["diffusion"], "ddim", n, seeds,
+                                args.out / f"eval_diffusion_ddim{n}_{spacing}_{args.episodes}.json",
+                                reuse=not args.fresh, spacing=spacing)
+            walked = policy.with_config(ddim_timestep_spacing=spacing).make_sampler("ddim", n).timesteps
+            score = mean_estimate(d["max_reward"])
+            rate = rate_estimate(np.asarray(d["success"], dtype=bool))
+            print(f"DP DDIM-{n:<2d} {spacing:8s} t = {[int(t) for t in walked]}: score {score}, success {rate.value:.0%} "
+                  f"({d['seconds']:.0f} s)")
+            rec(SECTION, f"DP score, DDIM-{n}, {spacing} spacing", round(score.value, 3), "", f"{COMMAND} --only spacing",
+                note=f"success {rate.value:.1%} (Wilson 95 % {rate.lo:.1%}-{rate.hi:.1%}); timesteps walked "
+                     f"{', '.join(str(int(t)) for t in walked)}; {n} U-Net call(s) per chunk; {common}",
+                interval=(round(score.lo, 3), round(score.hi, 3)), n=score.n, seeds=f"{seeds[0]}-{seeds[-1]}")
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--only", choices=["score", "latency", "shipped"], default=None, help="run one part")
+    parser.add_argument("--only", choices=["score", "latency", "shipped", "spacing"], default=None, help="run one part")
     parser.add_argument("--episodes", type=int, default=200, help="held-out episodes for the score part (default 200)")
     parser.add_argument("--repeats", type=int, default=30, help="latency rounds (default 30)")
     parser.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
@@ -211,7 +247,8 @@ def main(argv: list[str] | None = None) -> None:
     missing = [str(p) for p in CKPT.values() if not (p / "config.json").is_file()]
     if missing:
         raise SystemExit(f"missing checkpoints: {missing}")
-    for name, part in (("score", part_score), ("latency", part_latency), ("shipped", part_shipped)):
+    for name, part in (("score", part_score), ("latency", part_latency), ("shipped", part_shipped),
+                       ("spacing", part_spacing)):
         if args.only in (None, name):
             part(args, rec)
 

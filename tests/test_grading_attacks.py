@@ -1,6 +1,9 @@
 """The hostile corpus (tests/grading_corpus/attacks/): every attack class of issue 12, each aimed at
 ONE exercise while the same student's other exercise is honest, graded with `--jobs 2` next to
-honest classmates. With bubblewrap: the attacked exercise scores its documented points, every
+honest classmates. An attacker hands in two modules, the attacked one and an honest partner
+(temporal_ensembling for the chunk_windows attacks, chunk_windows for the kl ones), and not the
+class's third exercise: only three submissions then start torch (the kl test module and its worker
+import it), which keeps this corpus to about a third of the time. With bubblewrap: the attacked exercise scores its documented points, every
 other row is untouched, no row is lost, the grader finishes, nothing outside the scratch area
 changes, no process is left and a worker's disk stays within its cap. Without bubblewrap
 (forced with COURSEKIT_SANDBOX=none) the rows README's threat table marks as contained then
@@ -23,9 +26,11 @@ from coursekit.grading.exercises import get_exercise, repo_root
 from coursekit.grading.grade import grade_submissions
 from coursekit.grading.sandbox import Limits
 
-pytestmark = pytest.mark.slow  # ~24 students x 2 exercises: ~1-3 min on 2 busy cores
+pytestmark = pytest.mark.slow  # 25 students, 2-3 exercises each: about a minute on 2 busy cores
 ATTACKS = Path(__file__).parent / "grading_corpus" / "attacks"
-EXERCISES = ["chunk_windows", "kl"]
+EXERCISES = ["chunk_windows", "kl", "temporal_ensembling"]
+PARTNER = {"chunk_windows": "temporal_ensembling", "kl": "chunk_windows"}
+"""The honest module an attacker hands in beside the attacked one (numpy-only where possible)."""
 LIMITS = Limits(timeout_s=60, test_timeout_s=15, memory_mb=1024, output_mb=8, disk_mb=32)
 FULL = {e: get_exercise(e).max_points for e in EXERCISES}
 
@@ -67,10 +72,13 @@ def _submissions(tmp: Path, attacks) -> Path:
     for name in list(attacks) + HONEST:
         folder = subs / name
         folder.mkdir(parents=True)
-        for exercise in EXERCISES:
-            shutil.copy(solutions / f"{exercise}.py", folder)
         if name in attacks:
-            shutil.copy(ATTACKS / name / f"{_target(name)}.py", folder)
+            target = _target(name)
+            shutil.copy(ATTACKS / name / f"{target}.py", folder)
+            shutil.copy(solutions / f"{PARTNER[target]}.py", folder)
+        else:
+            for exercise in EXERCISES:
+                shutil.copy(solutions / f"{exercise}.py", folder)
     return subs
 
 
@@ -133,9 +141,10 @@ def _check_rows(result, attacks):
         assert float(rows[name][target]) == points, (name, rows[name], grade[target].reason)
         if status is not None:
             assert grade[target].status == status, (name, grade[target].status, grade[target].reason)
-        for other in EXERCISES:
-            if other != target:
-                assert float(rows[name][other]) == FULL[other], f"{name}: its honest {other} was hurt: {rows[name]}"
+        partner = PARTNER[target]
+        assert float(rows[name][partner]) == FULL[partner], f"{name}: its honest {partner} was hurt: {rows[name]}"
+        for other in set(EXERCISES) - {target, partner}:  # not handed in: a zero row, never run
+            assert float(rows[name][other]) == 0 and grade[other].status == "missing", (name, other, grade[other].status)
         assert text in (out / name / "feedback.md").read_text(), f"{name}: {text!r} not in its feedback"
 
 

@@ -138,8 +138,12 @@ class Sandbox:
     """One exercise's worker for one submission (restarted after a crash), with deadlines."""
 
     def __init__(self, exercise_id: str, folder: str | os.PathLike, scratch: str | os.PathLike, limits: Limits, *,
-                 mode: str | None = None, solutions_dir: str = "", tag: str = "", reap: bool = False) -> None:
+                 mode: str | None = None, solutions_dir: str = "", tag: str = "", reap: bool = False,
+                 preload: tuple[str, ...] = ()) -> None:
         self.exercise = get_exercise(exercise_id)
+        self.preload = tuple(preload)
+        """Modules the worker imports at boot (:data:`coursekit.grading.worker.PRELOADABLE`), e.g.
+        ("torch",) when the tests send tensors."""
         self.folder, self.scratch, self.limits = Path(folder), Path(scratch), limits
         self.mode = mode or bubblewrap.mode()
         self.solutions_dir, self.tag, self.reap = solutions_dir, tag, reap
@@ -149,6 +153,9 @@ class Sandbox:
         """Seconds of the current test's timeout not yet spent WAITING on the worker (the test's own
         work, e.g. importing diffusers or computing a reference, does not count)."""
         self.worker: WorkerProcess | None = None
+        self.launched = False
+        """The current worker has its settings: it boots on its own from here (a starting thread may
+        then give up the GIL, e.g. to an import, without delaying the worker)."""
         self.generation = 0
         self.sticky: StudentCodeError | None = None  # an import-time failure: the same for every test
         self.import_error: StudentCodeError | None = None
@@ -260,6 +267,7 @@ class Sandbox:
             raise self.sticky
         self._raise_if_spent()
         self.kill()
+        self.launched = False
         self.generation += 1
         self.worker = WorkerProcess(self.exercise, self.scratch / f"worker-{self.generation}",
                                     self.folder / f"{self.exercise.id}.py", mode=self.mode,
@@ -268,7 +276,9 @@ class Sandbox:
                     "source": self.exercise.source, "objects": list(self.exercise.objects),
                     "solutions_dir": self.solutions_dir, "memory_mb": self.limits.memory_mb,
                     "file_mb": self.limits.output_mb, "disk_mb": self.limits.disk_mb,
-                    "cpu_s": int(self.limits.timeout_s) + 5, "nproc": 32 if self.worker.own_user else 0})
+                    "cpu_s": int(self.limits.timeout_s) + 5, "nproc": 32 if self.worker.own_user else 0,
+                    "preload": list(self.preload)})
+        self.launched = True
         boot = self._receive(max(self.budget_end, time.monotonic() + 1), during="starting the worker")
         if boot.get("kind") != "booted" or boot.get("error"):
             raise StudentCodeError("crashed", "", f"the worker could not start: {boot.get('error', boot)}")

@@ -25,6 +25,10 @@ from coursekit.grading import codec
 from coursekit.grading.exercises import load_exercise
 
 REQUEST_FD = 0
+PRELOADABLE = ("torch",)
+"""Modules the trusted side may ask the worker to import at boot, before the student's code: torch
+then loads while the trusted process imports its own copy (two cores, one wait) instead of at the
+first tensor a test sends (the wait of ``coursekit check`` would be both imports in a row)."""
 
 
 class ReferenceCalled(PermissionError):
@@ -281,6 +285,9 @@ def main() -> int:
     sys.dont_write_bytecode = True
     worker = Worker(int(settings["reply_fd"]))
     try:
+        for name in settings.get("preload", []):
+            if name in PRELOADABLE:
+                importlib.import_module(name)
         _block_reference(settings["source"], settings["objects"], settings.get("solutions_dir", ""))
     except BaseException as exc:  # noqa: BLE001 - the library itself failed to import: report it
         worker.send({"kind": "booted", "error": f"{type(exc).__name__}: {exc}"})

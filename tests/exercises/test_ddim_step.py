@@ -10,6 +10,7 @@ import torch
 
 from coursekit.diffusion.samplers import DDIMSampler
 from coursekit.diffusion.schedules import NoiseSchedule
+from coursekit.grading.compare import assert_close
 
 EXERCISE = "ddim_step"
 
@@ -112,7 +113,7 @@ def test_matches_diffusers_step_for_step(student, run):
     for t, want in zip(ref["timesteps"], want_all):
         tb = torch.full((REF_SHAPE[0],), t, dtype=torch.long)
         x = ours.step(_eps_model(x, tb, None), t, x, generator=g_ours)
-        torch.testing.assert_close(x, want, rtol=1e-5, atol=1e-5,
+        assert_close(x, want, rtol=1e-5, atol=1e-5,
                                    msg=lambda m: f"{n}-step DDIM (eta={eta}) differs from diffusers at t={t}: {m}")
 
 

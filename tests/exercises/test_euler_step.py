@@ -5,6 +5,8 @@ from __future__ import annotations
 import pytest
 import torch
 
+from coursekit.grading.compare import assert_close
+
 EXERCISE = "euler_step"
 
 SHAPE = (3, 16, 2)
@@ -24,7 +26,7 @@ def test_step_closed_form(student):
         got = student.euler_step(_model, x, t, dt, 0.3)
         want = x + dt * (torch.tanh(x) * 0.8 + 0.3 * t)
         assert got.shape == SHAPE, f"shape {tuple(got.shape)}, expected {SHAPE}"
-        torch.testing.assert_close(got, want, rtol=1e-5, atol=1e-6,
+        assert_close(got, want, rtol=1e-5, atol=1e-6,
                                    msg=lambda m: f"t={t}, dt={dt}: x_next = x_t + dt * v(x_t, t, cond): {m}")
 
 
@@ -57,14 +59,14 @@ def _run(student, v, x1, n):
 def test_exact_on_a_constant_field(student, n):
     c = torch.tensor([0.5, -1.5], dtype=torch.float64)
     x1 = _x(3, torch.float64)
-    torch.testing.assert_close(_run(student, lambda x, t, cond: c.expand_as(x), x1, n), x1 - c,
+    assert_close(_run(student, lambda x, t, cond: c.expand_as(x), x1, n), x1 - c,
                                msg=lambda m: f"{n} steps on v = c must move x by exactly -c: {m}")
 
 
 def test_first_order_on_a_linear_field(student):
     x1 = _x(4, torch.float64)
     for n in (1, 2, 5, 10):
-        torch.testing.assert_close(_run(student, lambda x, t, cond: x, x1, n), x1 * (1 - 1 / n) ** n,
+        assert_close(_run(student, lambda x, t, cond: x, x1, n), x1 * (1 - 1 / n) ** n,
                                    msg=lambda m: f"dx/dt = x, {n} steps: Euler gives x1 (1 - 1/N)^N: {m}")
     exact = x1 * torch.exp(torch.tensor(-1.0, dtype=torch.float64))
     e16 = float((_run(student, lambda x, t, c: x, x1, 16) - exact).abs().max())

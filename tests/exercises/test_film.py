@@ -11,6 +11,7 @@ import pytest
 import torch
 import torch.nn.functional as F
 
+from coursekit.grading.compare import assert_close
 from coursekit.nn.unet1d import ConditionalUnet1D, UNet1DConfig
 
 EXERCISE = "film"
@@ -48,7 +49,7 @@ def test_film_matches_closed_form(student, sandbox, cond_dim, channels, length):
     got = film(h, cond)
     want = _closed_form(h, cond, weight, bias)
     assert tuple(got.shape) == tuple(h.shape), f"output shape {tuple(got.shape)}, expected (B, C, L) = {tuple(h.shape)}"
-    torch.testing.assert_close(got, want, rtol=1e-5, atol=1e-6,
+    assert_close(got, want, rtol=1e-5, atol=1e-6,
                                msg=lambda m: f"the output differs from scale * h + bias, [scale | bias] = linear(mish(cond)): {m}")
     # gradients computed in the worker against autograd through the closed form here
     seed = torch.randn(got.shape, generator=g)
@@ -59,7 +60,7 @@ def test_film_matches_closed_form(student, sandbox, cond_dim, channels, length):
     for name, a, b in [("h", g_h, ref[0]), ("cond", g_cond, ref[1]), ("linear.weight", g_params.get("linear.weight"), ref[2]),
                        ("linear.bias", g_params.get("linear.bias"), ref[3])]:
         assert a is not None, f"no gradient reached {name}: keep the forward pass in torch operations"
-        torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-5, msg=lambda m, n=name: f"the gradient with respect to {n} differs: {m}")
+        assert_close(a, b, rtol=1e-4, atol=1e-5, msg=lambda m, n=name: f"the gradient with respect to {n} differs: {m}")
 
 
 def test_film_scale_first_then_bias(student, sandbox):
@@ -67,7 +68,7 @@ def test_film_scale_first_then_bias(student, sandbox):
     sandbox.load_state_dict(film, {"linear.weight": torch.zeros(6, 2),
                                    "linear.bias": torch.tensor([2.0, 2.0, 2.0, 1.0, 1.0, 1.0])})
     got = film(torch.ones(1, 3, 4), torch.zeros(1, 2))
-    torch.testing.assert_close(got, torch.full((1, 3, 4), 3.0),
+    assert_close(got, torch.full((1, 3, 4), 3.0),
                                msg=lambda m: f"with scales 2 and biases 1 the output must be 2 * 1 + 1 = 3 (first C outputs scale, last C add): {m}")
 
 
@@ -76,7 +77,7 @@ def test_film_uses_mish_on_the_condition(student, sandbox):
     sandbox.load_state_dict(film, {"linear.weight": torch.tensor([[1.0], [0.0]]), "linear.bias": torch.zeros(2)})
     cond = torch.tensor([[-1.0], [2.0]])
     got = film(torch.ones(2, 1, 1), cond)
-    torch.testing.assert_close(got.reshape(2), F.mish(cond).reshape(2),
+    assert_close(got.reshape(2), F.mish(cond).reshape(2),
                                msg=lambda m: f"the scale must be linear(mish(cond)), not linear(cond): {m}")
 
 
@@ -95,6 +96,6 @@ def test_film_plugs_into_the_unet(student, sandbox):
     reference.load_state_dict(sandbox.state_dict(net))
     with torch.no_grad():
         want = reference(x, 5, torch.ones(2, 4))
-    torch.testing.assert_close(out_b, want, rtol=1e-4, atol=1e-5,
+    assert_close(out_b, want, rtol=1e-4, atol=1e-5,
                                msg=lambda m: f"the U-Net's output with your FiLM differs from the reference FiLM's: {m}")
     assert not torch.allclose(out_a, out_b), "the condition must change the U-Net's output through FiLM"

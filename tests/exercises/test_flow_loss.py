@@ -12,6 +12,8 @@ import pytest
 import torch
 import torch.nn.functional as F
 
+from coursekit.grading.compare import assert_close
+
 EXERCISE = "flow_loss"
 
 
@@ -71,7 +73,7 @@ def test_model_sees_the_interpolated_chunk(student):
     assert "x_t" in seen, "flow_matching_loss must call velocity_model(x_t, t, cond)"
     for b in range(4):
         want = float(t[b]) * e[b] + (1 - float(t[b])) * a0[b]
-        torch.testing.assert_close(seen["x_t"][b], want, rtol=1e-5, atol=1e-6,
+        assert_close(seen["x_t"][b], want, rtol=1e-5, atol=1e-6,
                                    msg=lambda m: f"sample {b}: x_t must be t * noise + (1 - t) * a0: {m}")
     assert torch.equal(seen["t"], t), "the t given to velocity_model differs from the t passed in: pass it unchanged"
     assert seen["cond"] is not None and torch.equal(seen["cond"], cond), "pass cond to velocity_model unchanged"
@@ -99,6 +101,6 @@ def test_loss_backpropagates(student, sandbox):
     w2 = torch.tensor(0.3, requires_grad=True)
     tb = t[:, None]
     F.mse_loss(w2 * (tb * e + (1 - tb) * a0), e - a0).backward()
-    torch.testing.assert_close(grads["w"], w2.grad, rtol=1e-4, atol=1e-6,
+    assert_close(grads["w"], w2.grad, rtol=1e-4, atol=1e-6,
                                msg=lambda m: f"d loss / d w (the model's parameter) differs: {m}")
     assert math.isfinite(float(loss.detach()))

@@ -15,6 +15,7 @@ import torch
 import torch.nn.functional as F
 
 from coursekit.diffusion.schedules import NoiseSchedule
+from coursekit.grading.compare import assert_close
 
 EXERCISE = "noise_loss"
 
@@ -43,7 +44,7 @@ def test_q_sample_matches_closed_form(student, seed):
     for i, ti in enumerate(t.tolist()):
         a = float(ABAR[ti])
         want = math.sqrt(a) * x0[i] + math.sqrt(1 - a) * noise[i]
-        torch.testing.assert_close(got[i], want, rtol=1e-5, atol=1e-6,
+        assert_close(got[i], want, rtol=1e-5, atol=1e-6,
                                    msg=lambda m: f"sample {i} (t={ti}) differs from sqrt(abar_t) x0 + sqrt(1-abar_t) eps: {m}")
 
 
@@ -54,7 +55,7 @@ def test_q_sample_endpoints_and_other_shapes(student):
         got = student.q_sample(x0, t, noise, ABAR.clone())
         assert got.shape == (3, 5), f"shape {tuple(got.shape)}, expected (3, 5)"
         a = float(ABAR[ti])
-        torch.testing.assert_close(got, math.sqrt(a) * x0 + math.sqrt(1 - a) * noise, rtol=1e-5, atol=1e-6,
+        assert_close(got, math.sqrt(a) * x0 + math.sqrt(1 - a) * noise, rtol=1e-5, atol=1e-6,
                                    msg=lambda m: f"(B, D) inputs at t={ti}: {m}")
     assert torch.isfinite(got).all()
 
@@ -73,7 +74,7 @@ def test_q_sample_matches_diffusers_add_noise(student):
     x0, noise, t = _inputs(4, shape=(6, 8, 3))
     assert t.tolist() == GOLDEN["add_noise"]["t"]
     got = student.q_sample(x0, t, noise, ABAR.clone())
-    torch.testing.assert_close(got, torch.tensor(GOLDEN["add_noise"]["x_t"]).reshape(6, 8, 3), rtol=1e-5, atol=1e-5)
+    assert_close(got, torch.tensor(GOLDEN["add_noise"]["x_t"]).reshape(6, 8, 3), rtol=1e-5, atol=1e-5)
 
 
 def test_epsilon_loss_is_mse_on_noise(student):
@@ -88,14 +89,14 @@ def test_epsilon_loss_is_mse_on_noise(student):
     loss = student.epsilon_loss(eps_model, x0, cond, t, noise, ABAR.clone(), q_sample_fn=reference_q_sample)
     x_t = reference_q_sample(x0, t, noise, ABAR)
     assert "x_t" in seen, "epsilon_loss never called eps_model(x_t, t, cond)"
-    torch.testing.assert_close(seen["x_t"], x_t, rtol=1e-5, atol=1e-6,
+    assert_close(seen["x_t"], x_t, rtol=1e-5, atol=1e-6,
                                msg=lambda m: f"the x_t given to eps_model must be q_sample_fn(x0, t, noise, abar): {m}")
     assert torch.equal(seen["t"], t), "the t given to eps_model differs from the t passed in: pass it unchanged"
     assert seen["cond"] is not None and torch.equal(seen["cond"], cond), \
         "the cond given to eps_model differs from the cond passed in: pass it unchanged"
     assert torch.is_tensor(loss), f"the loss must be a tensor, got {type(loss).__name__}"
     assert loss.ndim == 0, f"the loss must be a scalar (0-d tensor), got shape {tuple(loss.shape)}"
-    torch.testing.assert_close(loss, F.mse_loss(0.5 * x_t + cond, noise), rtol=1e-5, atol=1e-7,
+    assert_close(loss, F.mse_loss(0.5 * x_t + cond, noise), rtol=1e-5, atol=1e-7,
                                msg=lambda m: f"the loss value differs from mean((eps_model(x_t) - noise)^2): {m}")
 
 
@@ -105,10 +106,10 @@ def test_epsilon_loss_uses_q_sample_fn_and_backpropagates(student, sandbox):
     model = sandbox.new("coursekit.grading.worker:scale_model", 0.3)  # eps = w * x_t, w a parameter (in the worker)
     loss, (grads,) = sandbox.grad(student.epsilon_loss, model, x0, None, t, noise, ABAR.clone(),
                                   q_sample_fn=lambda *args: fake_x_t, wrt=(model,))
-    torch.testing.assert_close(loss.detach(), ((0.6 - noise) ** 2).mean(), rtol=1e-5, atol=1e-7,
+    assert_close(loss.detach(), ((0.6 - noise) ** 2).mean(), rtol=1e-5, atol=1e-7,
                                msg=lambda m: f"the loss value: build x_t with the q_sample_fn argument: {m}")
     assert grads["w"] is not None, "no gradient reached the model's parameter: keep the loss a torch expression"
-    torch.testing.assert_close(grads["w"], (2 * (0.6 - noise) * 2.0).mean(), rtol=1e-4, atol=1e-6,
+    assert_close(grads["w"], (2 * (0.6 - noise) * 2.0).mean(), rtol=1e-4, atol=1e-6,
                                msg=lambda m: f"d loss / d w (the model's parameter) differs: {m}")
 
 

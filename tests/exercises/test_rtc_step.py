@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 import torch
 
+from coursekit.grading.compare import assert_close
 from coursekit.grading.worker import toy_clean_estimate
 
 EXERCISE = "rtc_step"
@@ -156,8 +157,8 @@ def test_vjp_is_jacobian_transpose_times_weighted_error(student, sandbox, seed):
     m, t, x, y, w = _problem(seed)
     x0_ref, v_ref, g_ref = reference_guidance(m, t, x, y, w)
     x0, out, g = _student_guidance(student, sandbox, m, t, x, y, w)
-    torch.testing.assert_close(x0, x0_ref, msg=lambda e: f"x0_hat must be clean_fn(x)[0], unchanged: {e}")
-    torch.testing.assert_close(out, v_ref, msg=lambda e: f"the model output must be clean_fn(x)[1], unchanged: {e}")
+    assert_close(x0, x0_ref, msg=lambda e: f"x0_hat must be clean_fn(x)[0], unchanged: {e}")
+    assert_close(out, v_ref, msg=lambda e: f"the model output must be clean_fn(x)[1], unchanged: {e}")
     if not torch.allclose(g, g_ref, rtol=1e-5, atol=1e-8):
         why = _guidance_diagnosis(g, m, t, x, y, w) or "g differs from J^T W (Y - x0_hat)"
         err = float((g - g_ref).abs().max())
@@ -202,7 +203,7 @@ def test_update_closed_form(student):
         got = student.guided_update(out, g, scale)
         assert torch.is_tensor(got) and tuple(got.shape) == (2, 6, 2), \
             f"expected a tensor of shape (2, 6, 2), got {tuple(getattr(got, 'shape', ()))}"
-        torch.testing.assert_close(got, out - scale * g, msg=lambda e: f"scale {scale}: out' = out - scale * g: {e}")
+        assert_close(got, out - scale * g, msg=lambda e: f"scale {scale}: out' = out - scale * g: {e}")
 
 
 def test_update_pulls_toward_the_previous_chunk(student):
