@@ -93,12 +93,33 @@ LONGEST_FIRST = ("test_notebooks.py", "test_shipped_checkpoints.py", "test_gradi
 """Modules started first (about their order of cost in ``make test``); the rest follow in file order."""
 
 
+def _skip_notebook_runs_done_in_lab(items) -> None:
+    """A chapter that a collected ``lab_runs`` test runs in JupyterLab (real kernel, fast mode, the
+    same error and banner checks) is not run again through nbclient in the same mode: skip that
+    pass of tests/test_notebooks.py. Only when the browser test can run (chromium, playwright)."""
+    import importlib.util
+
+    from headless_chromium import find_chromium
+
+    in_lab = {m.args[0] for item in items for m in item.iter_markers("lab_runs")}
+    if not in_lab or find_chromium() is None or importlib.util.find_spec("playwright") is None:
+        return
+    mode = os.environ.get("COURSEKIT_EXERCISES", "exercises")
+    for item in items:
+        spec = getattr(item, "callspec", None)
+        if item.originalname == "test_notebook_runs" and spec is not None and spec.params.get("mode") == mode \
+                and spec.params["path"].stem in in_lab:
+            item.add_marker(pytest.mark.skip(reason="run in JupyterLab by tests/test_browser_lab.py (same mode and checks)"))
+
+
+@pytest.hookimpl(trylast=True)  # after -m / -k deselection: only browser tests that will run count
 def pytest_collection_modifyitems(config, items):
     def rank(item) -> int:
         name = item.path.name
         return LONGEST_FIRST.index(name) if name in LONGEST_FIRST and item.path.parent.name == "tests" else len(LONGEST_FIRST)
 
     items.sort(key=rank)  # stable: every module stays contiguous, in its own order
+    _skip_notebook_runs_done_in_lab(items)
 
 
 @pytest.hookimpl(optionalhook=True)  # a hook of pytest-xdist: only called when it is installed
