@@ -25,7 +25,7 @@ Run on a QUIET machine (the numbers are wall-clock): ``.venv/bin/python -m bench
   when the two ran on different thread counts); with ``--reuse`` the DP run is only re-scored.
 - ``shipped``: scores ``coursekit/checkpoints/pusht_{diffusion,regression}_state`` by notebook
   05's protocol (DDIM-10, plus DDPM-100 for DP); ``tests/test_shipped_checkpoints.py`` re-checks
-  those rows through ``coursekit eval``.
+  the checkpoints episode by episode through ``coursekit eval`` (``benchmarks/shipped_golden.py``).
 - Recipe: ``--recipe cpu`` (default: lr 5e-4, batch 128, a deliberate departure for a 20-minute
   budget, see ``TrainConfig.recipe``) or ``--recipe paper`` (lr 1e-4, batch 256). Other variants:
   ``--down-dims 48,96,192``, ``--batch-size``, ``--lr``.

@@ -16,8 +16,8 @@ Run: ``.venv/bin/python -m benchmarks.bench_flow`` (about 10 minutes on one thre
 - ``latency``: one chunk at batch 1 (B=1, To observations), median over ``--repeats`` rounds in
   which flow 1/2/4/10 Euler steps, flow midpoint-2, DP DDIM-10 and ACT (``act_pusht``, one pass with z = 0) take
   turns, so that a shared machine's load hits all alike.
-- ``shipped``: the flow checkpoint's own default (Euler-10) on 50 seeds, the row
-  ``tests/test_shipped_checkpoints.py`` reproduces through ``coursekit eval``.
+- ``shipped``: the flow checkpoint's own default (Euler-10) on 50 seeds, as ``coursekit eval``
+  runs it (``tests/test_shipped_checkpoints.py`` re-checks the checkpoint episode by episode).
 - ``spacing``: chapter 10's question ("can ten steps collapse to one?") on equal terms. The DP
   checkpoint's own DDIM spacing is diffusers' "leading" one, whose single step queries t = 0 and
   so returns near-noise (chapter 4): Euler-1 against that DDIM-1 compares a flow head with a
@@ -201,7 +201,7 @@ def part_shipped(args: argparse.Namespace, rec) -> None:
         f"{COMMAND} --only shipped",
         note=f"success {rate.value:.0%}; 50 held-out seeds from 100000, 300 steps, the checkpoint's default sampler; "
              f"trained {training_note(CKPT['flow'])} (float16 weights); evaluated with {d['torch_threads']} torch "
-             f"thread(s); reproduced by tests/test_shipped_checkpoints.py",
+             f"thread(s); the checkpoint's own sampler, as `coursekit eval` runs it",
         interval=(round(score.lo, 3), round(score.hi, 3)), n=score.n, seeds=f"{seeds[0]}-{seeds[-1]}")
 
 

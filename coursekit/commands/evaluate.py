@@ -52,8 +52,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--device", type=device, default="auto", help="auto, cpu, cuda, mps (default auto)")
     parser.add_argument("--threads", type=threads, default=None, help="torch CPU threads (default: torch's choice)")
     parser.add_argument("--json", type=output_path, default=None,
-                        help="also write the summary to this JSON file (an earlier `coursekit eval` summary there is "
-                             "replaced; any other file is refused)")
+                        help="also write the summary, with each episode's seed, score, success and steps, to this JSON "
+                             "file (an earlier `coursekit eval` summary there is replaced; any other file is refused)")
     parser.add_argument("--record", type=output_path, default=None,
                         help="write a meshcat HTML replay and a PNG grid of first/last frames to this new folder")
     parser.add_argument("--record-episodes", type=int_in(1, MAX_EPISODES), default=None,
@@ -152,7 +152,8 @@ def _evaluate(args: argparse.Namespace, locks: dict[str, Any]) -> int:
     adapter = make_adapter(task, policy)
     result = evaluate(policy, adapter, seeds, max_steps=args.max_steps, sampling=sampling, seed=args.seed,
                       dataset_meta=info.get("dataset"), progress=not args.no_progress, record=args.record is not None)
-    summary = {"format": SUMMARY_FORMAT, "checkpoint": str(args.checkpoint), **result.summary()}
+    summary = {"format": SUMMARY_FORMAT, "checkpoint": str(args.checkpoint), **result.summary(),
+               "per_episode": _per_episode(adapter, result)}
     if args.record is not None:
         summary["record"] = {k: str(v) for k, v in _write_replay(args, adapter, result, locks["record"]).items()}
     return _report(args, summary, locks.get("json"))
@@ -185,6 +186,14 @@ def _check_flags_apply(args: argparse.Namespace, policy: Any) -> None:
             raise ValueError(f"{given}: {exc}") from None
 
 
+def _per_episode(adapter: Any, result: Any) -> dict[str, list]:
+    """Each episode's seed, score and success as the task's protocol judges them, and its steps
+    (columns of equal length: for paired comparisons and bootstrap intervals over seeds)."""
+    scores, success = adapter.episode_scores(result)
+    return {"seed": [int(s) for s in result.seeds], "score": [round(float(v), 6) for v in scores],
+            "success": [bool(v) for v in success], "steps": [int(v) for v in result.length]}
+
+
 def _write_replay(args: argparse.Namespace, adapter: Any, result: Any, lock: Any) -> dict[str, Any]:
     """The first --record-episodes episodes as EpisodeRecordings -> coursekit.viz.replay.write_replay."""
     from coursekit.viz.replay import EpisodeRecording, write_replay
@@ -200,8 +209,8 @@ def _write_replay(args: argparse.Namespace, adapter: Any, result: Any, lock: Any
 def _report(args: argparse.Namespace, summary: dict, lock: Any) -> int:
     from coursekit.atomic import atomic_write_text
 
-    text = json.dumps(summary, indent=1)
-    print(text)
+    # the screen gets the summary; the per-episode columns go only to the --json file
+    print(json.dumps({k: v for k, v in summary.items() if k != "per_episode"}, indent=1))
     if args.json is not None:
-        atomic_write_text(args.json, text + "\n", lock=lock)
+        atomic_write_text(args.json, json.dumps(summary, indent=1) + "\n", lock=lock)
     return 0
