@@ -136,6 +136,7 @@ def part_train(args, seeds: list[int], rec) -> None:
     subsets = {"all starts": np.ones_like(two), "two-way starts": two, "other starts": ~two}
     conditions = (f"{args.data.name}, pusht_keypoints, recipe cpu, budget "
                   f"{f'{args.steps} steps' if args.steps else f'{args.minutes:g} min'}, {args.threads} thread(s)")
+    budget = f", {args.steps} steps" if args.name_budget and args.steps else ""  # the budget curve's rows
     rewards: dict[str, np.ndarray] = {}  # variant -> (training seeds, n) max reward
     for name, (_, _, sampling) in VARIANTS.items():
         if args.variants and not any(v in name for v in args.variants):
@@ -152,7 +153,7 @@ def part_train(args, seeds: list[int], rec) -> None:
         for subset, mask in subsets.items():
             scores = [float(r[mask].mean()) for r in per_seed]
             mean, lo, hi = t_estimate(scores)
-            label = f"{name} score, {k} training seed(s)" + ("" if subset == "all starts" else f", {subset}")
+            label = f"{name} score, {k} training seed(s){budget}" + ("" if subset == "all starts" else f", {subset}")
             rec(label, (mean, max(0.0, lo), min(1.0, hi), k * int(mask.sum())),
                 f"mean over training seeds {args.train_seeds} (per seed: {', '.join(f'{s:.3f}' for s in scores)}; "
                 f"sd {np.std(scores, ddof=1) if k > 1 else 0.0:.3f}); 95 % t-interval over training seeds; "
@@ -163,7 +164,8 @@ def part_train(args, seeds: list[int], rec) -> None:
         for subset, mask in subsets.items():
             gaps = [float(a[mask].mean() - b[mask].mean()) for a, b in zip(rewards[dp], rewards[other])]
             mean, lo, hi = t_estimate(gaps)
-            rec(f"DP DDIM-10 minus {short}, {len(gaps)} training seed(s), {subset}", (mean, lo, hi, len(gaps) * int(mask.sum())),
+            rec(f"DP DDIM-10 minus {short}, {len(gaps)} training seed(s){budget}, {subset}",
+                (mean, lo, hi, len(gaps) * int(mask.sum())),
                 f"paired by training seed {args.train_seeds} (same seed for both; per seed: "
                 f"{', '.join(f'{g:+.3f}' for g in gaps)}); 95 % t-interval over training seeds; "
                 f"{int(mask.sum())} starts per seed; step-matched, {conditions}")
@@ -179,6 +181,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--variants", nargs="+", default=[], help="substrings of variant names to run (default all)")
     parser.add_argument("--minutes", type=float, default=30.0, help="training budget per run (wall clock)")
     parser.add_argument("--steps", type=int, default=None, help="training budget in optimiser steps instead")
+    parser.add_argument("--name-budget", action="store_true",
+                        help="put the step budget in the row names (the budget curve: one set of rows per --steps)")
     parser.add_argument("--data", type=Path, default=DATA)
     parser.add_argument("--out", type=Path, default=ROOT / "outputs" / "bench_chunk_ablation")
     args = parser.parse_args(argv)
@@ -193,6 +197,7 @@ def main(argv: list[str] | None = None) -> int:
         cmd += f" --train-seeds {' '.join(map(str, args.train_seeds))} " + (f"--steps {args.steps}" if args.steps
                                                                              else f"--minutes {args.minutes:g}")
         cmd += "".join(f" --variants '{v}'" if i == 0 else f" '{v}'" for i, v in enumerate(args.variants))
+        cmd += " --name-budget" if args.name_budget else ""
 
     def rec(name, est, note):
         value, lo, hi, n = (est.value, est.lo, est.hi, est.n) if hasattr(est, "value") else est

@@ -24,7 +24,7 @@ Run: ``.venv/bin/python -m benchmarks.bench_flow`` (about 10 minutes on one thre
   handicapped sampler. This part runs DP DDIM-N with "trailing" spacing (N = 1 queries t = 99, the
   noise level the sampler starts from) and with "leading" spacing for N = 1, 2, 4, 10, on the same
   seeds and protocol as ``score`` (DDIM-10 leading is the ``score`` part's DP row, evaluated again
-  here so the part stands alone; the evaluation is deterministic, so the two agree).
+  here so the part stands alone; the two rows agree).
 
 Both checkpoints were trained on the same 400 demonstrations (seeds 0..399, DART noise 0/5 px,
 keypoint features), recipe ``cpu`` (lr 5e-4, batch 128), training seed 0; their step counts are
