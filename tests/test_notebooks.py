@@ -166,8 +166,8 @@ def test_notebook_runs(path, mode, monkeypatch):
 def test_chapter5_full_mode_evaluates_the_policy_it_just_trained(monkeypatch):
     """Not fast mode, but a tiny budget: the freshly trained policy is evaluated beside the shipped one."""
     path = ROOT / "notebooks" / "05_diffusion_policy_pusht.ipynb"
-    budget = {"demos": 4, "train_minutes": 0.1, "show_episodes": 1, "knob_episodes": 1, "knob_steps": 6,
-              "eval_episodes": 2, "max_steps": 12}
+    budget = {"demos": 4, "train_minutes": 0.05, "show_episodes": 1, "knob_episodes": 1, "knob_steps": 6,
+              "eval_episodes": 2, "max_steps": 12, "replay_steps": 12}
     probe = ("import json as _json\n"
              "print('PROBE' + _json.dumps({'fast': FAST, 'steps': result.summary['steps'],\n"
              "      'trained_evaluated': [name for name, pol in contenders.items() if pol is result.policy],\n"

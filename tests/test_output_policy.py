@@ -267,7 +267,8 @@ def test_a_second_train_on_the_same_out_refuses_at_once_naming_the_first(area, o
     if overwrite:
         assert subprocess.run(_train(area, out, "--steps", "2"), env=ENV, timeout=240).returncode == 0
     extra = ["--overwrite"] if overwrite else []
-    first = subprocess.Popen(_train(area, out, "--steps", "100000", "--minutes", "0.3", *extra), env=ENV,
+    # 12 s of training: the second (no data loaded, no torch imported) refuses within a second or two
+    first = subprocess.Popen(_train(area, out, "--steps", "100000", "--minutes", "0.2", *extra), env=ENV,
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         first.stdout.readline()  # its first line comes after the data is loaded: it holds the lock by then
