@@ -4,9 +4,8 @@ honest classmates. An attacker hands in two modules, the attacked one and an hon
 (temporal_ensembling for the chunk_windows attacks, chunk_windows for the kl ones), and not the
 class's third exercise: only three submissions then start torch (the kl test module and its worker
 import it), which about halves the time of this corpus. With bubblewrap: the attacked exercise
-scores its documented points, every
-other row is untouched, no row is lost, the grader finishes, nothing outside the scratch area
-changes, no process is left and a worker's disk stays within its cap. Without bubblewrap
+scores its documented points, every other row is untouched, no row is lost, the grader finishes,
+nothing outside the scratch area changes, no process is left and a worker's disk stays within its cap. Without bubblewrap
 (forced with COURSEKIT_SANDBOX=none) the rows README's threat table marks as contained then
 are graded the same way (the others would damage this machine, so they are not run)."""
 
