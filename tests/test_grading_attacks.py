@@ -5,9 +5,9 @@ honest classmates. An attacker hands in two modules, the attacked one and an hon
 class's third exercise: only three submissions then start torch (the kl test module and its worker
 import it), which about halves the time of this corpus. With bubblewrap: the attacked exercise
 scores its documented points, every other row is untouched, no row is lost, the grader finishes,
-nothing outside the scratch area changes, no process is left and a worker's disk stays within its cap. Without bubblewrap
-(forced with COURSEKIT_SANDBOX=none) the rows README's threat table marks as contained then
-are graded the same way (the others would damage this machine, so they are not run)."""
+nothing outside the scratch area changes, no process is left and a worker's disk stays within its
+cap. Without bubblewrap (forced with COURSEKIT_SANDBOX=none) the rows README's threat table marks as
+contained then are graded the same way (the others would damage this machine, so they are not run)."""
 
 from __future__ import annotations
 
