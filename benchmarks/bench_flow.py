@@ -35,7 +35,6 @@ read from the checkpoints and written into every row. Every figure goes through
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import os
 import statistics
@@ -46,10 +45,11 @@ import numpy as np
 import torch
 
 from benchmarks.results import record
-from coursekit.checkpoint import load_checkpoint, read_checkpoint_info
+from coursekit.checkpoint import WEIGHTS_FILE, load_checkpoint, read_checkpoint_info
 from coursekit.evaluate import evaluate_pusht, heldout_seeds
 from coursekit.atomic import atomic_write_text
 from coursekit.stats import bootstrap_interval, mean_estimate, rate_estimate
+from coursekit.weights_file import file_sha256
 
 COMMAND = ".venv/bin/python -m benchmarks.bench_flow"
 SECTION = "Flow matching"
@@ -61,7 +61,7 @@ FLOW_STEPS = (1, 2, 4, 10)
 
 
 def _weights_hash(checkpoint: Path) -> str:
-    return hashlib.sha256((checkpoint / "model.safetensors").read_bytes()).hexdigest()[:16]
+    return file_sha256(checkpoint / WEIGHTS_FILE)[:16]
 
 
 def evaluate_cached(checkpoint: Path, sampler: str, steps: int, seeds: list[int], cache: Path,

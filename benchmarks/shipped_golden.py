@@ -16,7 +16,6 @@ Regenerate after retraining a checkpoint (the test says when: the weights' sha25
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import platform
 import tempfile
@@ -47,7 +46,10 @@ def fingerprint() -> dict[str, str]:
 
 
 def weights_sha256(checkpoint: Path) -> str:
-    return hashlib.sha256((checkpoint / "model.safetensors").read_bytes()).hexdigest()
+    from coursekit.checkpoint import WEIGHTS_FILE
+    from coursekit.weights_file import file_sha256
+
+    return file_sha256(checkpoint / WEIGHTS_FILE)
 
 
 def shipped() -> list[Path]:
