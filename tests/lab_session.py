@@ -182,6 +182,16 @@ class LabPage:
         later: a click can land while the page is still busy settling.
         """
         deadline = time.monotonic() + timeout_s
+        # Exported meshcat pages (iframes with a srcdoc) redraw WebGL on the CPU every frame; while
+        # the kernel runs they would compete with it for the two cores, so they stay hidden (not
+        # laid out, not drawn) until the last cell has run. Widget views are left alone.
+        hidden = self.page.add_style_tag(content=".jp-OutputArea-output iframe[srcdoc] { display: none !important; }")
+        try:
+            self._run_all(deadline, timeout_s)
+        finally:
+            hidden.evaluate("element => element.remove()")
+
+    def _run_all(self, deadline: float, timeout_s: float) -> None:
         for _attempt in range(3):
             self.page.locator(".jp-Notebook").first.click()
             self.command("Run", "Run All Cells")
