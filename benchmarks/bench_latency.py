@@ -103,10 +103,34 @@ def _threads() -> int:
     return torch.get_num_threads()
 
 
-def _block_file(cache: Path, name: str, strategy: str, d: int, start: int, n: int, args: argparse.Namespace) -> Path:
+def _block_file(cache: Path, name: str, strategy: str, d: int, start: int, n: int, args: argparse.Namespace,
+                s: int | None = None) -> Path:
     rtc = f"_beta{args.max_guidance:g}_{args.prefix}" if strategy == "rtc" else ""
-    tag = f"{name}_{strategy}_d{d}_s{start}_n{n}_seed{args.seed}{rtc}"
+    horizon = "" if s is None else f"_exec{s}"  # s: actions executed per chunk, when not the head's own Ta
+    tag = f"{name}_{strategy}_d{d}_s{start}_n{n}_seed{args.seed}{rtc}{horizon}"
     return cache / f"{tag}.json"
+
+
+def evaluate_blocks(policy, name: str, strategy: str, d: int, seeds: list[int], args: argparse.Namespace,
+            s: int | None = None) -> list[dict]:
+    """Evaluate ``seeds`` in cached blocks of ``args.block`` (resumable); with ``s``, the head executes s per chunk."""
+    run = policy if s is None else policy.with_config(n_action_steps=s)
+    cache = Path(args.cache).expanduser()
+    cache.mkdir(parents=True, exist_ok=True)
+    parts = []
+    for b in (seeds[i:i + args.block] for i in range(0, len(seeds), args.block)):
+        f = _block_file(cache, name, strategy, d, b[0], len(b), args, s)
+        if f.is_file():
+            parts.append(json.loads(f.read_text()))
+            continue
+        part = run_block(run, name, strategy, d, b, args)
+        tmp = f.with_suffix(".tmp")
+        tmp.write_text(json.dumps(part))
+        tmp.replace(f)  # atomic: a killed run leaves no half-written block
+        parts.append(part)
+        print(f"  {HEADS[name][3]} {strategy} d={d}{'' if s is None else f' s={s}'} seeds {b[0]}..{b[-1]}: "
+              f"{np.mean(part['max_reward']):.3f} ({part['seconds']:.0f} s)", flush=True)
+    return parts
 
 
 def run_block(policy, name: str, strategy: str, d: int, seeds: list[int], args: argparse.Namespace) -> dict:
@@ -126,10 +150,7 @@ def run_block(policy, name: str, strategy: str, d: int, seeds: list[int], args: 
 def part_curves(args: argparse.Namespace) -> None:
     from coursekit.stats import bootstrap_interval, wilson_interval
 
-    cache = Path(args.cache).expanduser()
-    cache.mkdir(parents=True, exist_ok=True)
     seeds_all = list(range(args.seed_start, args.seed_start + args.episodes))
-    blocks = [seeds_all[i:i + args.block] for i in range(0, len(seeds_all), args.block)]
     for name in args.heads:
         policy = load_head(name)
         if policy is None:
@@ -140,19 +161,7 @@ def part_curves(args: argparse.Namespace) -> None:
             if strategy == "rtc" and not hasattr(policy, "predict_inpainted"):
                 continue  # RTC guides an iterative sampler: not ACT
             for d in args.d:
-                parts = []
-                for b in blocks:
-                    f = _block_file(cache, name, strategy, d, b[0], len(b), args)
-                    if f.is_file():
-                        parts.append(json.loads(f.read_text()))
-                        continue
-                    part = run_block(policy, name, strategy, d, b, args)
-                    tmp = f.with_suffix(".tmp")
-                    tmp.write_text(json.dumps(part))
-                    tmp.replace(f)  # atomic: a killed run leaves no half-written block
-                    parts.append(part)
-                    print(f"  {label} {strategy} d={d} seeds {b[0]}..{b[-1]}: {np.mean(part['max_reward']):.3f} "
-                          f"({part['seconds']:.0f} s)", flush=True)
+                parts = evaluate_blocks(policy, name, strategy, d, seeds_all, args)
                 _record_point(label, task, strategy, d, parts, args, bootstrap_interval, wilson_interval)
 
 
