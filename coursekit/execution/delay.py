@@ -53,6 +53,9 @@ def delay_steps(latency_s: float, control_hz: float) -> int:
 
     A latency of exactly k periods gives d = k (the chunk is ready at the k-th tick); a
     tolerance of 1e-9 periods keeps float noise (0.3 s at 10 Hz = 2.9999...) from adding a step.
+    Deliberate: the RTC paper (Black et al. 2025), as we read it, writes d with a floor; rounding
+    up is the conservative reading (a chunk arriving mid-period has missed that tick) and the one
+    used throughout the course; both agree at whole periods.
     """
     if not (isinstance(latency_s, (int, float, np.floating)) and math.isfinite(latency_s) and latency_s >= 0):
         raise ValueError(f"latency_s must be a finite number of seconds >= 0, got {latency_s!r}")
