@@ -19,6 +19,7 @@ pytest.importorskip("mujoco")
 from coursekit.cli import main  # noqa: E402
 from coursekit.policies import POLICY_TYPES  # noqa: E402
 from coursekit.tasks import TASKS  # noqa: E402
+from conftest import SAMPLES, TINY  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -77,3 +78,21 @@ def test_a_run_folder_and_an_eval_replay_a_person_can_look_at(policy, task, demo
                      .convert("RGB"), dtype=np.float64)[120:]  # below the caption box
     background = np.median(img[:, :4], axis=1, keepdims=True)  # meshcat's vertical gradient, row by row
     assert (np.abs(img - background).max(axis=-1) > 30).mean() > 0.05, "the replay page is blank"
+
+
+@pytest.mark.parametrize("policy", ["diffusion", "flow"])
+def test_horizon_flag_trains_a_longer_chunk_that_evaluates(policy, demos, tmp_path):
+    """--horizon 32 (chapter 11's longer head): the checkpoint predicts (B, 32, Da) and executes up to 31."""
+    from coursekit.checkpoint import load_checkpoint
+
+    run = tmp_path / "run"
+    assert main(["train", "--policy", policy, "--data", str(demos["pusht"]), "--steps", "2", "--batch-size", "4",
+                 "--warmup-steps", "1", "--out", str(run), "--threads", "1", "--no-progress", "--horizon", "32",
+                 *TINY[policy]]) == 0
+    policy_obj = load_checkpoint(run, device="cpu")
+    spec = policy_obj.execution_spec()
+    assert (spec.horizon, spec.n_obs_steps, spec.n_action_steps) == (32, 2, 8)  # Ta keeps its default
+    history = np.zeros((1, 2, policy_obj.config.obs_dim), dtype=np.float32)  # (B, To, obs_dim)
+    assert tuple(policy_obj.with_config(n_action_steps=31).predict_chunk(history).shape) == (1, 32, 2)
+    assert main(["eval", str(run), "--episodes", "1", "--max-steps", "4", "--threads", "1", "--no-progress",
+                 "--n-action-steps", "24", *SAMPLES[policy]]) == 0

@@ -61,6 +61,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "angle for PushT, aloha_state = qpos + object poses for the arm pair)")
     parser.add_argument("--chunk-size", type=int_in(1, MAX_CHUNK_SIZE), default=None,
                         help=f"k, actions per ACT chunk, at most {MAX_CHUNK_SIZE} and the longest episode (default: ACTConfig's)")
+    parser.add_argument("--horizon", type=int_in(2, MAX_CHUNK_SIZE), default=None,
+                        help="Tp, actions per predicted chunk of diffusion, flow and regression heads (default 16, "
+                             "divisible by 2**(U-Net levels - 1)); ACT's is --chunk-size")
     parser.add_argument("--unet", default=None, help="U-Net size preset: cpu (default), paper_lowdim, paper_image")
     parser.add_argument("--down-dims", type=int_list_in(1, MAX_CHANNELS, MAX_LEVELS), default=None,
                         help=f"override the preset's U-Net channels, e.g. 32,64,128 (each at most {MAX_CHANNELS})")
@@ -107,6 +110,8 @@ def _config_fields(args: argparse.Namespace) -> dict[str, Any]:
         fields["vision"] = VisionEncoderConfig.preset(args.vision)
     if args.chunk_size is not None:
         fields["chunk_size"] = args.chunk_size
+    if args.horizon is not None:
+        fields["horizon"] = args.horizon
     if args.n_action_steps is not None:
         fields["n_action_steps"] = args.n_action_steps
     return fields
