@@ -261,6 +261,24 @@ EXERCISES: tuple[Exercise, ...] = (
                                                                      "from the previous chunk Y; take it off: out' = out - scale * g."}),
         },
     ),
+    Exercise(
+        id="spatial_softmax",
+        chapter=12,
+        title="The spatial softmax: a keypoint (x, y) from each heat map",
+        source="coursekit.nn.vision",
+        objects=("spatial_softmax",),
+        tests={
+            "test_keypoints_shape_and_dtype": (1, "Return (B, K, 2) in the maps' dtype: one (x, y) per map, x first."),
+            "test_peak_gives_its_pixel_centre": (3, "A peak at row i, column j gives x = -1 + 2 j / (W - 1), y = -1 + 2 i / (H - 1): "
+                                                    "x from the column, y from the row, both in [-1, 1] (torch.linspace(-1, 1, n))."),
+            "test_uniform_map_gives_the_centre": (1, "A flat map puts equal weight on every pixel: its mean position is (0, 0)."),
+            "test_two_equal_peaks_give_their_midpoint": (1, "The keypoint is the EXPECTED position under the softmax (a weighted mean), not the arg-max."),
+            "test_matches_numpy_on_random_maps": (2, "p = softmax of each map over its own H*W positions (flatten(2).softmax(-1)); keypoint = sum p * (x, y)."),
+            "test_adding_a_constant_changes_nothing": (1, "A softmax over each map's positions ignores a constant added to that map; normalise per map, not across maps."),
+            "test_gradients_reach_the_maps": (1, "Use torch ops only (no .item(), numpy or argmax) so gradients flow back into the maps."),
+            "test_plugs_into_the_encoder_layer": (1, "spatial_softmax(maps) must work inside SpatialSoftmax: maps (B, K, H, W) from a 1x1 conv."),
+        },
+    ),
 )
 
 

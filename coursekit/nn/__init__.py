@@ -8,8 +8,15 @@ from coursekit.nn.unet1d import (
     SinusoidalPosEmb,
     UNet1DConfig,
 )
-from coursekit.nn.vision import SpatialSoftmax, VisionEncoder, VisionEncoderConfig, center_crop, random_crop
+from coursekit.nn.vision import (
+    SpatialSoftmax,
+    VisionEncoder,
+    VisionEncoderConfig,
+    center_crop,
+    random_crop,
+    spatial_softmax,
+)
 
 __all__ = ["Conv1dBlock", "ConditionalResidualBlock1D", "ConditionalUnet1D", "FiLM", "SinusoidalPosEmb",
            "SpatialSoftmax", "UNet1DConfig", "VisionEncoder", "VisionEncoderConfig", "center_crop",
-           "random_crop"]
+           "random_crop", "spatial_softmax"]

@@ -8,6 +8,9 @@ weights. Augmentation: a random 84x84 crop of the 96x96 image in training, the c
 Departures (flagged): widths are configurable (``VisionEncoderConfig()`` is a narrower CPU version;
 ``preset("resnet18")`` has ResNet-18's 64/128/256/512); the keypoints go through Linear -> ReLU to
 ``feature_dim`` as in LeRobot's port.
+
+``spatial_softmax`` is exercise "spatial_softmax" (12.1); ``SpatialSoftmax(..., keypoints_fn=...)`` and
+``VisionEncoder(..., keypoints_fn=...)`` take a student's version.
 """
 
 from __future__ import annotations
@@ -96,26 +99,63 @@ def center_crop(images: torch.Tensor, size) -> torch.Tensor:
     return images[..., top:top + h, left:left + w]
 
 
+def spatial_softmax(maps: torch.Tensor) -> torch.Tensor:
+    """The expected image position of each heat map: (B, K, H, W) -> (B, K, 2) as (x, y).
+
+    Levine et al. (2016, "End-to-end training of deep visuomotor policies"): each of the K
+    maps becomes a distribution over its own H*W positions,
+
+        p_k(i, j) = exp(m_k(i, j)) / sum_{i', j'} exp(m_k(i', j')),
+
+    and the keypoint is that distribution's mean position,
+
+        x_k = sum_{i, j} p_k(i, j) * x_j,    y_k = sum_{i, j} p_k(i, j) * y_i,
+
+    with x_j = -1 + 2 j / (W - 1) across the width (column j) and y_i = -1 + 2 i / (H - 1) down the
+    height (row i): both span [-1, 1] from the first to the last pixel centre, (-1, -1) is the
+    top-left pixel. Diffusion Policy (Chi et al. 2023, sec. 3.3) replaces ResNet's global average
+    pooling with this, as robomimic does: pooling forgets WHERE a feature fires, a keypoint keeps it.
+
+    Args:
+        maps: (B, K, H, W) floating-point heat maps (logits; any real values).
+
+    Returns:
+        keypoints: (B, K, 2) of maps' dtype and device, [..., 0] = x, [..., 1] = y.
+
+    Keep it differentiable (torch operations only): the encoder learns its maps through it.
+    """
+    if not torch.is_tensor(maps) or maps.ndim != 4 or not maps.is_floating_point():
+        got = f"{tuple(maps.shape)} {maps.dtype}" if torch.is_tensor(maps) else type(maps).__name__
+        raise ValueError(f"spatial_softmax expects a float tensor of heat maps (B, K, H, W), got {got}")
+    H, W = maps.shape[-2:]
+    # BEGIN SOLUTION
+    attn = maps.flatten(2).softmax(dim=-1)  # (B, K, H*W): each map sums to 1 over its positions
+    ys, xs = torch.meshgrid(torch.linspace(-1, 1, H, device=maps.device, dtype=maps.dtype),
+                            torch.linspace(-1, 1, W, device=maps.device, dtype=maps.dtype), indexing="ij")  # (H, W)
+    grid = torch.stack([xs.reshape(-1), ys.reshape(-1)], dim=-1)  # (H*W, 2) as (x, y)
+    keypoints = attn @ grid  # (B, K, 2)
+    # END SOLUTION
+    return keypoints
+
+
 class SpatialSoftmax(nn.Module):
     """Keypoints from a feature map (Levine et al. 2016): (B, C, H, W) -> (B, K, 2).
 
-    A 1x1 conv makes K heat maps; a softmax over the H*W positions of each gives a distribution whose
-    expected (x, y) in [-1, 1] is the keypoint.
+    A 1x1 conv makes K heat maps; :func:`spatial_softmax` turns each into the expected (x, y) in
+    [-1, 1] of a softmax over its H*W positions. ``keypoints_fn`` replaces that function (a student's
+    ``spatial_softmax`` in chapter 12); the default looks the library's up at call time.
     """
 
-    def __init__(self, in_channels: int, num_keypoints: int) -> None:
+    def __init__(self, in_channels: int, num_keypoints: int, keypoints_fn=None) -> None:
         super().__init__()
         self.to_maps = nn.Conv2d(in_channels, num_keypoints, 1)
         self.num_keypoints = num_keypoints
+        self.keypoints_fn = keypoints_fn
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        B, _, H, W = x.shape
-        maps = self.to_maps(x).flatten(2)  # (B, K, H*W)
-        attn = maps.softmax(dim=-1)  # (B, K, H*W)
-        ys, xs = torch.meshgrid(torch.linspace(-1, 1, H, device=x.device, dtype=x.dtype),
-                                torch.linspace(-1, 1, W, device=x.device, dtype=x.dtype), indexing="ij")
-        grid = torch.stack([xs.reshape(-1), ys.reshape(-1)], dim=-1)  # (H*W, 2) as (x, y)
-        return attn @ grid  # (B, K, 2)
+        maps = self.to_maps(x)  # (B, K, H, W)
+        fn = self.keypoints_fn if self.keypoints_fn is not None else spatial_softmax
+        return fn(maps)  # (B, K, 2)
 
 
 class BasicBlock(nn.Module):
@@ -141,9 +181,10 @@ class VisionEncoder(nn.Module):
     """One camera: images (B, C, H, W) in [-1, 1] -> features (B, feature_dim).
 
     In ``train()`` mode each image is randomly cropped to ``crop_size``; in ``eval()`` the centre crop.
+    ``keypoints_fn``: the spatial softmax's (B, K, H, W) -> (B, K, 2) (default :func:`spatial_softmax`).
     """
 
-    def __init__(self, config: VisionEncoderConfig | None = None) -> None:
+    def __init__(self, config: VisionEncoderConfig | None = None, keypoints_fn=None) -> None:
         super().__init__()
         self.config = cfg = config if config is not None else VisionEncoderConfig()
         w0 = cfg.widths[0]
@@ -158,7 +199,7 @@ class VisionEncoder(nn.Module):
                 stages.append(BasicBlock(cin, cout, stride, cfg.group_size))
                 cin = cout
         self.stages = nn.Sequential(*stages)
-        self.pool = SpatialSoftmax(cin, cfg.num_keypoints)
+        self.pool = SpatialSoftmax(cin, cfg.num_keypoints, keypoints_fn)
         self.out = nn.Linear(2 * cfg.num_keypoints, cfg.feature_dim)
 
     def forward(self, images: torch.Tensor, generator: torch.Generator | None = None) -> torch.Tensor:
