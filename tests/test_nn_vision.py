@@ -6,7 +6,7 @@ import pytest
 import torch
 from torch import nn
 
-from coursekit.nn import SpatialSoftmax, VisionEncoder, VisionEncoderConfig, center_crop, random_crop
+from coursekit.nn import SpatialSoftmax, VisionEncoder, VisionEncoderConfig, center_crop, random_crop, spatial_softmax
 
 TINY = VisionEncoderConfig(widths=(16, 16, 32, 32), blocks_per_stage=1, num_keypoints=8, feature_dim=24)
 
@@ -57,6 +57,29 @@ def test_spatial_softmax_finds_the_peak():
     fmap = torch.zeros(1, 1, 5, 9)
     fmap[0, 0, 4, 0] = 100.0  # bottom-left corner: x = -1, y = +1
     torch.testing.assert_close(ss(fmap), torch.tensor([[[-1.0, 1.0]]]), atol=1e-4, rtol=0)
+
+
+def test_spatial_softmax_closed_forms_and_the_layer_uses_it():
+    maps = torch.zeros(1, 3, 4, 6, dtype=torch.float64)
+    maps[0, 0, 0, 5] = 1e3  # top-right pixel centre: x = +1, y = -1
+    maps[0, 1, 3, 1] = maps[0, 1, 3, 3] = 1e3  # two equal peaks on the last row: their midpoint
+    want = torch.tensor([[[1.0, -1.0], [-1 + 2 * 2 / 5, 1.0], [0.0, 0.0]]], dtype=torch.float64)  # map 2 is flat
+    torch.testing.assert_close(spatial_softmax(maps), want, rtol=0, atol=1e-12)
+    calls = []
+    layer = SpatialSoftmax(2, 3, keypoints_fn=lambda m: calls.append(m.shape) or spatial_softmax(m))
+    x = torch.randn(2, 2, 5, 7)
+    torch.testing.assert_close(layer(x), spatial_softmax(layer.to_maps(x)))
+    assert calls == [(2, 3, 5, 7)]
+    enc = VisionEncoder(TINY, keypoints_fn=lambda m: torch.zeros(m.shape[0], m.shape[1], 2))
+    assert enc.pool.keypoints_fn is not None and enc.eval()(torch.rand(1, 3, 96, 96)).shape == (1, 24)
+
+
+@pytest.mark.parametrize("bad, words", [(torch.rand(3, 4, 5), r"\(B, K, H, W\), got \(3, 4, 5\) torch.float32"),
+                                        (torch.ones(1, 2, 3, 4, dtype=torch.long), "float tensor.*torch.int64"),
+                                        ([[1.0]], "got list")])
+def test_spatial_softmax_refuses_bad_maps(bad, words):
+    with pytest.raises(ValueError, match=words):
+        spatial_softmax(bad)
 
 
 def test_bad_input_raises():

@@ -73,7 +73,7 @@ def _mistakes(maps: np.ndarray) -> list[tuple[np.ndarray, str]]:
 def _diagnosis(got: np.ndarray, maps: np.ndarray) -> str:
     """The sentence naming the mistake ``got`` matches, else where it first differs."""
     for wrong, sentence in _mistakes(maps):
-        if wrong.shape == got.shape and np.allclose(got, wrong, rtol=1e-6, atol=1e-6):
+        if wrong.shape == got.shape and np.allclose(got, wrong, rtol=1e-5, atol=1e-5):
             return sentence
     want = reference(maps)
     b, k, c = np.unravel_index(int(np.argmax(np.abs(got - want))), got.shape)
@@ -189,12 +189,15 @@ def test_gradients_reach_the_maps(student, sandbox):
     g = torch.Generator().manual_seed(4)
     maps = torch.randn(2, 3, 5, 6, generator=g, dtype=torch.float64)
     seed = torch.randn(2, 3, 2, generator=g, dtype=torch.float64)
-    _, (got,) = sandbox.grad(student.spatial_softmax, maps, wrt=(0,), grad_output=seed)
+    value, (got,) = sandbox.grad(student.spatial_softmax, maps, wrt=(0,), grad_output=seed)
     assert got is not None, "no gradient reached the maps: compute the keypoints with torch ops (no .item(), numpy or argmax)"
     leaf = maps.clone().requires_grad_(True)
     (want,) = torch.autograd.grad(_torch_reference(leaf), (leaf,), seed)
+    forward = torch.as_tensor(value).detach().double().numpy()
+    why = "" if np.allclose(forward, reference(maps.numpy()), rtol=1e-7, atol=1e-9) else \
+        f" (the keypoints themselves are wrong: {_diagnosis(forward, maps.numpy())})"
     assert_close(got, want, rtol=1e-7, atol=1e-9,
-                 msg=lambda m: f"d keypoints / d maps differs from autograd through the softmax expectation: {m}")
+                 msg=lambda m: f"d keypoints / d maps differs from autograd through the softmax expectation{why}: {m}")
 
 
 def test_plugs_into_the_encoder_layer(student, sandbox):
@@ -210,4 +213,5 @@ def test_plugs_into_the_encoder_layer(student, sandbox):
     assert torch.is_tensor(got) and tuple(got.shape) == (2, K, 2), (
         f"SpatialSoftmax with your function must return (B, K, 2) = (2, {K}, 2), got {tuple(getattr(got, 'shape', ()))}")
     assert_close(got, want, rtol=1e-4, atol=1e-5,
-                 msg=lambda m: f"SpatialSoftmax's keypoints with your spatial_softmax differ from the reference: {m}")
+                 msg=lambda m: f"SpatialSoftmax's keypoints with your spatial_softmax differ from the reference: "
+                               f"{_diagnosis(got.double().numpy(), maps.double().numpy())}")
