@@ -120,9 +120,14 @@ def train_or_load(name: str, ts: int, args, dataset):
         cfg["unet"] = UNet1DConfig(**cfg["unet"])
     policy, batches, recipe = make_policy(kind, dataset, features="pusht_keypoints", recipe="cpu", seed=ts, **cfg)
     torch.manual_seed(ts)
+    # A step budget resumes exactly after a kill (coursekit.train_state): the state lives beside the
+    # run folder in the cache and is removed once the run's checkpoint is written.
+    state = args.out / f".{run.name}.state.pt" if args.steps else None
     result = train(policy, batches, TrainConfig(**{**recipe, **budget, "seed": ts, "num_threads": args.threads,
                                                    "progress": False, "checkpoint_every_minutes": None}),
-                   callbacks=[CheckpointSaver(run, dataset_meta=dataset.meta)])
+                   callbacks=[CheckpointSaver(run, dataset_meta=dataset.meta)], state_file=state)
+    if state is not None:
+        state.unlink(missing_ok=True)
     return result.policy, run  # the EMA weights: what the checkpoint holds (``policy`` itself keeps the raw ones)
 
 

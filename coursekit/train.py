@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import copy
 import math
+import os
 import time
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -214,7 +215,8 @@ def _batch_rows(batch: Any, default: int) -> int:
 
 
 def train(policy: Any, batches: Iterable[dict[str, Any]], config: TrainConfig, *,
-          callbacks: Sequence[TrainCallback] = (), init_from: dict[str, Any] | None = None) -> TrainResult:
+          callbacks: Sequence[TrainCallback] = (), init_from: dict[str, Any] | None = None,
+          state_file: str | os.PathLike | None = None) -> TrainResult:
     """Train ``policy`` in place on ``batches`` (an endless iterable of batch dicts) under ``config``.
 
     Args:
@@ -225,6 +227,10 @@ def train(policy: Any, batches: Iterable[dict[str, Any]], config: TrainConfig, *
         init_from: provenance of the weights ``policy`` starts from when this run continues an
             earlier one (``coursekit.checkpoint.warm_start``); stored as ``summary["init_from"]``
             so a checkpoint states its whole training, not only the last segment.
+        state_file: resume file (step budgets only; see :mod:`coursekit.train_state`): if it exists
+            the run continues from it exactly (the same bytes as an uninterrupted run); it is
+            rewritten every ``log_every`` steps at most every ``STATE_EVERY_S`` seconds, so a killed
+            run loses at most that much work.
     """
     threads_before = torch.get_num_threads()
     if config.num_threads is not None:
@@ -235,12 +241,19 @@ def train(policy: Any, batches: Iterable[dict[str, Any]], config: TrainConfig, *
     optimizer = make_optimizer(policy, config)
     ema = EMA(policy, config.ema_power, config.ema_max_decay) if config.ema else None
     run = _RunRecord(policy, ema, config, init_from, threads_used)
+    saver = None
+    if state_file is not None:
+        from coursekit.train_state import TrainState
+
+        saver = TrainState(state_file, config, policy, optimizer, ema, batches, run)
+        saver.resume()
     budget = _Budget(config, run.start)
     bar = tqdm(total=config.max_steps if config.max_steps is not None else int(budget.seconds),
                unit="step" if config.max_steps is not None else "s", disable=not config.progress,
                desc=f"train {getattr(policy, 'policy_type', '')}".strip(), dynamic_ncols=True)
     try:
-        _optimise(policy, iter(batches), optimizer, ema, budget, run, bar, callbacks)
+        bar.update(run.step if config.max_steps is not None else 0)  # a resumed run starts where it stopped
+        _optimise(policy, iter(batches), optimizer, ema, budget, run, bar, callbacks, saver)
         bar.total = bar.n  # the budget is used up: end full and green (a time bar stops a second short)
     finally:
         bar.close()
@@ -260,7 +273,7 @@ def train(policy: Any, batches: Iterable[dict[str, Any]], config: TrainConfig, *
 
 
 def _optimise(policy: Any, batch_iter: Iterator[dict[str, Any]], optimizer: torch.optim.Optimizer, ema: EMA | None,
-              budget: _Budget, run: _RunRecord, bar: Any, callbacks: Sequence[Any]) -> None:
+              budget: _Budget, run: _RunRecord, bar: Any, callbacks: Sequence[Any], saver: Any = None) -> None:
     """The training loop: set the step's LR, take one optimiser step, log and checkpoint, until the budget ends."""
     config = run.config
     base_lrs = [g["lr"] for g in optimizer.param_groups]
@@ -275,6 +288,8 @@ def _optimise(policy: Any, batch_iter: Iterator[dict[str, Any]], optimizer: torc
         now = time.perf_counter()
         if run.step % config.log_every == 0 or (config.max_steps is not None and run.step == config.max_steps):
             row = run.log(now, base_lrs[0] * factor)
+            if saver is not None:
+                saver.maybe_save(now)
             bar.set_postfix(loss=f"{row['loss']:.4f}", lr=f"{row['lr']:.1e}", sps=f"{row['samples_per_s']:.0f}")
             _notify(callbacks, "on_log", {"step": run.step, "loss": row["loss"], "lr": row["lr"],
                                           "samples_per_s": row["samples_per_s"], "wall_s": row["seconds"]})

@@ -41,6 +41,9 @@ class EpochSampler:
     Each epoch is a fresh permutation from ``generator``; the last incomplete batch of an epoch
     is dropped (every batch has exactly ``batch_size`` rows, as the reference trainer does).
     If ``n < batch_size`` each batch is one permutation cut to ``n`` rows.
+
+    The position in the current epoch is explicit state (``perm``, ``pos``), so a training run can
+    save it with :meth:`state_dict` and continue with exactly the batches it would have drawn.
     """
 
     def __init__(self, n: int, batch_size: int, generator: torch.Generator):
@@ -49,13 +52,36 @@ class EpochSampler:
         if batch_size < 1:
             raise ValueError(f"batch_size must be >= 1, got {batch_size}")
         self.n, self.batch_size, self.generator = int(n), int(batch_size), generator
+        self.perm: torch.Tensor | None = None  # (n,) the current epoch's order
+        self.pos = 0  # rows of perm already handed out
+
+    def next_indices(self) -> torch.Tensor:
+        """The next batch of indices (B,), B = min(batch_size, n); a new epoch when this one is used up."""
+        b = min(self.batch_size, self.n)
+        if self.perm is None or self.pos + b > self.n:
+            self.perm = torch.randperm(self.n, generator=self.generator)  # (n,)
+            self.pos = 0
+        out = self.perm[self.pos : self.pos + b]  # (B,)
+        self.pos += b
+        return out
 
     def __iter__(self) -> Iterator[torch.Tensor]:
-        b = min(self.batch_size, self.n)
         while True:
-            perm = torch.randperm(self.n, generator=self.generator)  # (n,)
-            for start in range(0, self.n - b + 1, b):
-                yield perm[start : start + b]  # (B,)
+            yield self.next_indices()
+
+    def state_dict(self) -> dict[str, Any]:
+        """Everything that decides the batches still to come: the generator, the epoch order and position."""
+        return {"n": self.n, "batch_size": self.batch_size, "generator": self.generator.get_state(),
+                "perm": None if self.perm is None else self.perm.clone(), "pos": self.pos}
+
+    def load_state_dict(self, state: Mapping[str, Any]) -> None:
+        """Continue from ``state`` (from :meth:`state_dict` of a sampler over the same n and batch size)."""
+        if (state.get("n"), state.get("batch_size")) != (self.n, self.batch_size):
+            raise ValueError(f"sampler state is for n={state.get('n')}, batch_size={state.get('batch_size')}; "
+                             f"this sampler has n={self.n}, batch_size={self.batch_size}")
+        self.generator.set_state(state["generator"])
+        self.perm = None if state["perm"] is None else state["perm"].clone()
+        self.pos = int(state["pos"])
 
 
 def _as_tensor(x: Any, name: str, device: torch.device) -> torch.Tensor:
@@ -123,6 +149,14 @@ class WindowBatcher:
         for which in self.sampler:
             yield self.batch(which)
 
+    def state_dict(self) -> dict[str, Any]:
+        """The shuffling state (see :meth:`EpochSampler.state_dict`): save it to resume a run exactly."""
+        return self.sampler.state_dict()
+
+    def load_state_dict(self, state: Mapping[str, Any]) -> None:
+        """Continue drawing batches from ``state`` (a :meth:`state_dict` of a batcher over the same data)."""
+        self.sampler.load_state_dict(state)
+
 
 class ChunkBatcher:
     """Endless ACT training batches ``{"obs": (B, Do), "action": (B, k, Da), "action_is_pad": (B, k)}``.
@@ -180,3 +214,11 @@ class ChunkBatcher:
     def __iter__(self) -> Iterator[dict[str, torch.Tensor]]:
         for which in self.sampler:
             yield self.batch(which)
+
+    def state_dict(self) -> dict[str, Any]:
+        """The shuffling state (see :meth:`EpochSampler.state_dict`): save it to resume a run exactly."""
+        return self.sampler.state_dict()
+
+    def load_state_dict(self, state: Mapping[str, Any]) -> None:
+        """Continue drawing batches from ``state`` (a :meth:`state_dict` of a batcher over the same data)."""
+        self.sampler.load_state_dict(state)
