@@ -112,7 +112,7 @@ def _block_file(cache: Path, name: str, strategy: str, d: int, start: int, n: in
 
 
 def evaluate_blocks(policy, name: str, strategy: str, d: int, seeds: list[int], args: argparse.Namespace,
-            s: int | None = None) -> list[dict]:
+                    s: int | None = None) -> list[dict]:
     """Evaluate ``seeds`` in cached blocks of ``args.block`` (resumable); with ``s``, the head executes s per chunk."""
     run = policy if s is None else policy.with_config(n_action_steps=s)
     cache = Path(args.cache).expanduser()
@@ -133,6 +133,24 @@ def evaluate_blocks(policy, name: str, strategy: str, d: int, seeds: list[int], 
     return parts
 
 
+def pusht_score(parts: list[dict]) -> tuple[float, tuple[float, float], int, str]:
+    """Mean max coverage of evaluated blocks, its bootstrap 95 % interval (rounded to 3 places and
+    widened to contain the rounded mean), n and the seed span "first-last"."""
+    from coursekit.stats import bootstrap_interval
+
+    scores = np.array([x for p in parts for x in p["max_reward"]])  # (n,) max coverage per episode
+    seeds = [s for p in parts for s in p["seeds"]]
+    lo, hi = bootstrap_interval(scores) if len(scores) > 1 else (scores[0], scores[0])
+    value = round(float(scores.mean()), 3)
+    return value, (min(round(lo, 3), value), max(round(hi, 3), value)), len(seeds), f"{min(seeds)}-{max(seeds)}"
+
+
+def mean_smoothness(parts: list[dict]) -> dict[str, float]:
+    """Each smoothness figure of evaluated blocks, averaged over episodes (blocks weighted by their seeds)."""
+    return {k: float(np.average([p["smooth"][k] for p in parts], weights=[len(p["seeds"]) for p in parts]))
+            for k in parts[0]["smooth"]}
+
+
 def run_block(policy, name: str, strategy: str, d: int, seeds: list[int], args: argparse.Namespace) -> dict:
     from coursekit.evaluate import evaluate, make_adapter, smoothness
 
@@ -148,7 +166,7 @@ def run_block(policy, name: str, strategy: str, d: int, seeds: list[int], args: 
 
 
 def part_curves(args: argparse.Namespace) -> None:
-    from coursekit.stats import bootstrap_interval, wilson_interval
+    from coursekit.stats import wilson_interval
 
     seeds_all = list(range(args.seed_start, args.seed_start + args.episodes))
     for name in args.heads:
@@ -162,10 +180,10 @@ def part_curves(args: argparse.Namespace) -> None:
                 continue  # RTC guides an iterative sampler: not ACT
             for d in args.d:
                 parts = evaluate_blocks(policy, name, strategy, d, seeds_all, args)
-                _record_point(label, task, strategy, d, parts, args, bootstrap_interval, wilson_interval)
+                _record_point(label, task, strategy, d, parts, args, wilson_interval)
 
 
-def _record_point(label, task, strategy, d, parts, args, bootstrap_interval, wilson_interval) -> None:
+def _record_point(label, task, strategy, d, parts, args, wilson_interval) -> None:
     seeds = [s for p in parts for s in p["seeds"]]
     n = len(seeds)
     shown = strategy
@@ -173,8 +191,7 @@ def _record_point(label, task, strategy, d, parts, args, bootstrap_interval, wil
         shown += "" if args.prefix == "guide" else f" ({args.prefix} prefix)"
         shown += "" if args.max_guidance == 5.0 else f" (clip {args.max_guidance:g})"
     span = f"{min(seeds)}-{max(seeds)}"
-    smooth = {k: float(np.average([p["smooth"][k] for p in parts], weights=[len(p["seeds"]) for p in parts]))
-              for k in parts[0]["smooth"]}
+    smooth = mean_smoothness(parts)
     cmd = (f"{COMMAND} --only curves --heads {args.head_of[label]} --strategies {strategy} --d {d} "
            f"--episodes {args.episodes} --seed-start {args.seed_start} --block {args.block}"  # the block size fixes
            # how episodes share a batch and a noise stream, so it is part of what reproduces the number exactly
@@ -183,11 +200,8 @@ def _record_point(label, task, strategy, d, parts, args, bootstrap_interval, wil
             f"{args.seed}, delay d={d} control steps, strategy {strategy}"
             f"{f', RTC guidance clip {args.max_guidance:g}, prefix {args.prefix}' if strategy == 'rtc' else ''}")
     if task == "pusht":
-        scores = np.array([x for p in parts for x in p["max_reward"]])
-        lo, hi = bootstrap_interval(scores) if n > 1 else (scores[0], scores[0])
-        value = round(float(scores.mean()), 3)
-        record(SECTION, f"{label}, {shown}, d={d}: score", value, "", cmd, note=note,
-               interval=(min(round(lo, 3), value), max(round(hi, 3), value)), n=n, seeds=span)
+        value, interval, _, _ = pusht_score(parts)
+        record(SECTION, f"{label}, {shown}, d={d}: score", value, "", cmd, note=note, interval=interval, n=n, seeds=span)
     else:
         k = int(sum(x for p in parts for x in p["strict"]))
         lo, hi = wilson_interval(k, n)

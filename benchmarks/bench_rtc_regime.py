@@ -29,19 +29,13 @@ import os
 
 import numpy as np
 
-from benchmarks.bench_latency import HEADS, SECTION, evaluate_blocks, load_head
+from benchmarks.bench_latency import HEADS, SECTION, evaluate_blocks, load_head, mean_smoothness, pusht_score
 from benchmarks.protocol import PROTOCOL_START, VALIDATION_START
 from benchmarks import results
 
 COMMAND = ".venv/bin/python -m benchmarks.bench_rtc_regime"
 STRATEGIES = ("async", "rtc")
 """The two strategies whose schedule s sets (synchronous and ensembling are not about s)."""
-
-
-def usable_horizon(policy) -> int:
-    """H = Tp - To + 1: how many actions of a chunk lie at or after the step it is requested at."""
-    spec = policy.execution_spec()
-    return spec.horizon - spec.n_obs_steps + 1
 
 
 def regime_grid(d: int, horizon: int, points: int = 4, own: int | None = None) -> list[int]:
@@ -56,21 +50,11 @@ def regime_grid(d: int, horizon: int, points: int = 4, own: int | None = None) -
     return sorted(grid)
 
 
-def _score(parts: list[dict]) -> tuple[float, tuple[float, float], int, str]:
-    from coursekit.stats import bootstrap_interval
-
-    scores = np.array([x for p in parts for x in p["max_reward"]])  # (n,) max coverage per episode
-    seeds = [s for p in parts for s in p["seeds"]]
-    lo, hi = bootstrap_interval(scores) if len(scores) > 1 else (scores[0], scores[0])
-    value = round(float(scores.mean()), 3)
-    return value, (min(round(lo, 3), value), max(round(hi, 3), value)), len(seeds), f"{min(seeds)}-{max(seeds)}"
-
-
 def sweep_point(policy, name: str, strategy: str, d: int, args: argparse.Namespace) -> None:
     """Validation sweep over s for one (head, strategy, d), then the chosen s on the protocol seeds."""
     record = (lambda *a, **k: None) if args.no_record else results.record
     label = HEADS[name][3]
-    H = usable_horizon(policy)
+    H = policy.execution_spec().usable_horizon
     own = policy.execution_spec().n_action_steps
     grid = regime_grid(d, H, args.points, own)
     if not grid:
@@ -81,7 +65,7 @@ def sweep_point(policy, name: str, strategy: str, d: int, args: argparse.Namespa
            f"--val-episodes {args.val_episodes} --episodes {args.episodes} --block {args.block}")
     val = {}
     for s in grid:
-        value, interval, n, span = _score(evaluate_blocks(policy, name, strategy, d, val_seeds, args, s))
+        value, interval, n, span = pusht_score(evaluate_blocks(policy, name, strategy, d, val_seeds, args, s))
         val[s] = value
         record(SECTION, f"{label}, {strategy}, d={d}, s={s}: validation score", value, "", cmd, interval=interval,
                n=n, seeds=span, note=f"VALIDATION seeds (s is chosen here); usable horizon H = {H}, regime "
@@ -89,9 +73,8 @@ def sweep_point(policy, name: str, strategy: str, d: int, args: argparse.Namespa
     best = max(grid, key=lambda s: (val[s], -abs(s - own)))  # ties: the s closest to the head's own Ta
     parts = evaluate_blocks(policy, name, strategy, d, list(range(PROTOCOL_START, PROTOCOL_START + args.episodes)),
                             args, best)
-    value, interval, n, span = _score(parts)
-    smooth = {k: float(np.average([p["smooth"][k] for p in parts], weights=[len(p["seeds"]) for p in parts]))
-              for k in parts[0]["smooth"]}
+    value, interval, n, span = pusht_score(parts)
+    smooth = mean_smoothness(parts)
     chosen = ", ".join(f"s={s}: {val[s]:.3f}" for s in grid)
     note = (f"s = {best} chosen on {args.val_episodes} validation seeds ({chosen}); usable horizon H = {H}; "
             f"{n} held-out seeds{' (REDUCED run: the protocol is 200)' if n < 200 else ''}; sampling seed {args.seed}")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from benchmarks.bench_rtc_regime import regime_grid, usable_horizon
+from benchmarks.bench_rtc_regime import regime_grid
 
 
 @pytest.mark.parametrize("d", range(1, 8))
@@ -27,4 +27,4 @@ def test_usable_horizon_of_the_shipped_pusht_head():
 
     policy = load_checkpoint(SHIPPED_DIR / "pusht_diffusion_state", device="cpu")
     spec = policy.execution_spec()
-    assert usable_horizon(policy) == spec.horizon - spec.n_obs_steps + 1 == 15  # Tp = 16, To = 2
+    assert spec.usable_horizon == spec.horizon - spec.n_obs_steps + 1 == 15  # Tp = 16, To = 2

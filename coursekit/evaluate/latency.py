@@ -38,8 +38,7 @@ def chunk_latency_ms(policy: Any, task: str, *, sampling: Mapping[str, Any] | No
     history = stack_history([adapter.obs_fn([obs])] * policy.execution_spec().n_obs_steps)  # (1, To, ...)
     gen = torch.Generator().manual_seed(int(seed))
     if guided:
-        spec = policy.execution_spec()
-        n = spec.horizon - (spec.n_obs_steps - 1)
+        n = policy.execution_spec().usable_horizon
         target, weights = np.zeros((1, n, policy.config.action_dim)), np.linspace(1.0, 0.0, n)
 
         def call() -> Any:

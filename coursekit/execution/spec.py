@@ -46,6 +46,12 @@ class ExecutionSpec:
     ensemble_decay: float = 0.01
     """m in w_i = exp(-m i) for temporal ensembling (ACT's 0.01)."""
 
+    @property
+    def usable_horizon(self) -> int:
+        """H = Tp - To + 1: the actions of a chunk at or after the step it was requested at (the
+        first To - 1 are for observed, past steps); RTC's regime is d <= s <= H - d."""
+        return self.horizon - (self.n_obs_steps - 1)
+
     def __post_init__(self) -> None:
         check_horizons(self.n_obs_steps, self.horizon, self.n_action_steps)
         if not (np.isfinite(self.ensemble_decay) and self.ensemble_decay >= 0):
