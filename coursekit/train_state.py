@@ -12,8 +12,8 @@ and the training config it belongs to (a state written under another config is r
 the fields that differ). Only step budgets resume: with a minutes budget the number of steps
 depends on the machine's speed, so "the same run" is not defined.
 
-The file is written atomically (temporary file in the same folder, then ``os.replace``): a kill
-during a write leaves the previous state.
+The file is written with :func:`coursekit.atomic.atomic_path`: a kill during a write leaves the
+previous state, and the next write removes the killed one's temporary.
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ from typing import Any
 
 import torch
 
+from coursekit.atomic import atomic_path
 from coursekit.config import config_to_dict
 
 STATE_EVERY_S = 60.0
@@ -59,10 +60,8 @@ class TrainState:
     def save(self, now: float | None = None) -> None:
         """Write the state atomically (called at log points, right after a log row closed)."""
         now = time.perf_counter() if now is None else now
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
-        torch.save(self._payload(now), tmp)
-        os.replace(tmp, self.path)
+        with atomic_path(self.path) as tmp:  # a kill mid-write leaves the previous state (and no stray temporary)
+            torch.save(self._payload(now), tmp)
         self.last_save = now
 
     def maybe_save(self, now: float) -> None:
