@@ -21,7 +21,9 @@ for the seeds actually evaluated, with n and the seed range in the row. Run a su
 
 Heads: dp (shipped PushT DP, its DDIM-10), dp-ddpm (the same with DDPM-100), flow (the shipped
 PushT flow policy, Euler-10, if present), act (ACT on PushT), act-cube (ACT, transfer cube),
-dp-cube (DP, transfer cube). RTC needs a diffusion or flow head and is skipped for ACT.
+dp-cube (DP, transfer cube), flow-tp32 (a flow head with a longer horizon, Tp = 32, trained like the
+shipped one: not shipped; it is looked up in ``TRAINED_HEADS`` and trained by ``TRAIN_COMMANDS``).
+RTC needs a diffusion or flow head and is skipped for ACT.
 """
 
 from __future__ import annotations
@@ -38,6 +40,8 @@ from coursekit.execution.rtc import STRATEGIES
 
 ROOT = Path(__file__).resolve().parent.parent
 CKPT = ROOT / "coursekit" / "checkpoints"
+TRAINED_HEADS = Path(os.environ.get("XDG_CACHE_HOME", "~/.cache")).expanduser() / "coursekit" / "heads"
+"""Where heads that are not shipped are looked for (trained by ``TRAIN_COMMANDS``, never in the repository)."""
 COMMAND = ".venv/bin/python -m benchmarks.bench_latency"
 SECTION = "Latency budget"
 HEADS = {  # name -> (checkpoint dir, task, sampling options, label)
@@ -47,6 +51,13 @@ HEADS = {  # name -> (checkpoint dir, task, sampling options, label)
     "act": ("act_pusht", "pusht", {}, "PushT ACT"),
     "act-cube": ("act_transfer_cube", "transfer_cube", {}, "transfer cube ACT"),
     "dp-cube": ("dp_transfer_cube", "transfer_cube", {}, "transfer cube DP DDIM-10"),
+    "flow-tp32": ("pusht_flow_state_tp32", "pusht", {}, "PushT flow Euler-10 (Tp = 32)"),
+}
+TRAIN_COMMANDS = {  # heads not shipped: how each was trained (the shipped flow head's data, recipe, seed, steps)
+    "flow-tp32": ("coursekit train --policy flow --recipe cpu --features pusht_keypoints --horizon 32 "
+                  "--data pusht_400ep_seed0_noise0-5.npz --steps 19259 --seed 0 --threads 1 "
+                  "--out ~/.cache/coursekit/heads/pusht_flow_state_tp32 (data: coursekit collect pusht --episodes 400 "
+                  "--seed 0 --action-noise 0,5)"),
 }
 DELAYS = (0, 1, 2, 4, 8)
 STRATEGY_NAMES = tuple(STRATEGIES)  # sync, async, ensemble, rtc
@@ -61,10 +72,19 @@ def _csv(text: str, allowed: tuple | None, kind: type = str) -> list:
     return items
 
 
+def missing_head(name: str) -> str:
+    """Why the head ``name`` is skipped, and how to make it when it is not shipped."""
+    where = f"{CKPT / HEADS[name][0]}" + (f" nor {TRAINED_HEADS / HEADS[name][0]}" if name in TRAIN_COMMANDS else "")
+    how = f" (train it: {TRAIN_COMMANDS[name]})" if name in TRAIN_COMMANDS else ""
+    return f"{name}: no checkpoint {where}{how}, skipped"
+
+
 def load_head(name: str):
     from coursekit.checkpoint import load_checkpoint
 
     path = CKPT / HEADS[name][0]
+    if not path.is_dir():
+        path = TRAINED_HEADS / HEADS[name][0]
     if not path.is_dir():
         return None
     return load_checkpoint(path, device="cpu")
@@ -76,7 +96,7 @@ def part_latency(args: argparse.Namespace) -> None:
     for name in args.heads:
         policy = load_head(name)
         if policy is None:
-            print(f"{name}: no checkpoint {HEADS[name][0]}, skipped")
+            print(missing_head(name))
             continue
         _, task, sampling, label = HEADS[name]
         ms = chunk_latency_ms(policy, task, sampling=sampling, repeats=args.repeats)
@@ -172,7 +192,7 @@ def part_curves(args: argparse.Namespace) -> None:
     for name in args.heads:
         policy = load_head(name)
         if policy is None:
-            print(f"{name}: no checkpoint {HEADS[name][0]}, skipped")
+            print(missing_head(name))
             continue
         _, task, _, label = HEADS[name]
         for strategy in args.strategies:

@@ -29,7 +29,8 @@ import os
 
 import numpy as np
 
-from benchmarks.bench_latency import HEADS, SECTION, evaluate_blocks, load_head, mean_smoothness, pusht_score
+from benchmarks.bench_latency import (HEADS, SECTION, TRAIN_COMMANDS, evaluate_blocks, load_head, mean_smoothness,
+                                      missing_head, pusht_score)
 from benchmarks.protocol import PROTOCOL_START, VALIDATION_START
 from benchmarks import results
 
@@ -63,13 +64,14 @@ def sweep_point(policy, name: str, strategy: str, d: int, args: argparse.Namespa
     val_seeds = list(range(VALIDATION_START, VALIDATION_START + args.val_episodes))
     cmd = (f"{COMMAND} --heads {name} --strategies {strategy} --d {d} --points {args.points} "
            f"--val-episodes {args.val_episodes} --episodes {args.episodes} --block {args.block}")
+    trained = f"; head trained by: {TRAIN_COMMANDS[name]}" if name in TRAIN_COMMANDS else ""
     val = {}
     for s in grid:
         value, interval, n, span = pusht_score(evaluate_blocks(policy, name, strategy, d, val_seeds, args, s))
         val[s] = value
         record(SECTION, f"{label}, {strategy}, d={d}, s={s}: validation score", value, "", cmd, interval=interval,
                n=n, seeds=span, note=f"VALIDATION seeds (s is chosen here); usable horizon H = {H}, regime "
-                                     f"{max(1, d)} <= s <= {H - d}; sampling seed {args.seed}")
+                                     f"{max(1, d)} <= s <= {H - d}; sampling seed {args.seed}{trained}")
     best = max(grid, key=lambda s: (val[s], -abs(s - own)))  # ties: the s closest to the head's own Ta
     parts = evaluate_blocks(policy, name, strategy, d, list(range(PROTOCOL_START, PROTOCOL_START + args.episodes)),
                             args, best)
@@ -77,7 +79,8 @@ def sweep_point(policy, name: str, strategy: str, d: int, args: argparse.Namespa
     smooth = mean_smoothness(parts)
     chosen = ", ".join(f"s={s}: {val[s]:.3f}" for s in grid)
     note = (f"s = {best} chosen on {args.val_episodes} validation seeds ({chosen}); usable horizon H = {H}; "
-            f"{n} held-out seeds{' (REDUCED run: the protocol is 200)' if n < 200 else ''}; sampling seed {args.seed}")
+            f"{n} held-out seeds{' (REDUCED run: the protocol is 200)' if n < 200 else ''}; sampling seed {args.seed}"
+            + trained)
     record(SECTION, f"{label}, {strategy}, d={d}, best s: score", value, "", cmd, interval=interval, n=n,
            seeds=span, note=note)
     record(SECTION, f"{label}, {strategy}, d={d}, best s: smoothness",
@@ -117,7 +120,7 @@ def main(argv: list[str] | None = None) -> None:
     for name in heads:
         policy = load_head(name)
         if policy is None:
-            print(f"{name}: no checkpoint {HEADS[name][0]}, skipped")
+            print(missing_head(name))
             continue
         for strategy in strategies:
             if strategy == "rtc" and not hasattr(policy, "predict_inpainted"):
