@@ -22,7 +22,7 @@ for the seeds actually evaluated, with n and the seed range in the row. Run a su
 Heads: dp (shipped PushT DP, its DDIM-10), dp-ddpm (the same with DDPM-100), flow (the shipped
 PushT flow policy, Euler-10, if present), act (ACT on PushT), act-cube (ACT, transfer cube),
 dp-cube (DP, transfer cube), flow-tp32 (a flow head with a longer horizon, Tp = 32, trained like the
-shipped one: not shipped; it is looked up in ``TRAINED_HEADS`` and trained by ``TRAIN_COMMANDS``).
+shipped one: not shipped; trained by ``benchmarks/train_head.py`` into its ``TRAINED_HEADS``).
 RTC needs a diffusion or flow head and is skipped for ACT.
 """
 
@@ -36,12 +36,11 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.results import record
+from benchmarks.train_head import HEADS as TRAINED, TRAINED_HEADS, command as train_command
 from coursekit.execution.rtc import STRATEGIES
 
 ROOT = Path(__file__).resolve().parent.parent
 CKPT = ROOT / "coursekit" / "checkpoints"
-TRAINED_HEADS = Path(os.environ.get("XDG_CACHE_HOME", "~/.cache")).expanduser() / "coursekit" / "heads"
-"""Where heads that are not shipped are looked for (trained by ``TRAIN_COMMANDS``, never in the repository)."""
 COMMAND = ".venv/bin/python -m benchmarks.bench_latency"
 SECTION = "Latency budget"
 HEADS = {  # name -> (checkpoint dir, task, sampling options, label)
@@ -52,12 +51,6 @@ HEADS = {  # name -> (checkpoint dir, task, sampling options, label)
     "act-cube": ("act_transfer_cube", "transfer_cube", {}, "transfer cube ACT"),
     "dp-cube": ("dp_transfer_cube", "transfer_cube", {}, "transfer cube DP DDIM-10"),
     "flow-tp32": ("pusht_flow_state_tp32", "pusht", {}, "PushT flow Euler-10 (Tp = 32)"),
-}
-TRAIN_COMMANDS = {  # heads not shipped: how each was trained (the shipped flow head's data, recipe, seed, steps)
-    "flow-tp32": ("coursekit train --policy flow --recipe cpu --features pusht_keypoints --horizon 32 "
-                  "--data pusht_400ep_seed0_noise0-5.npz --steps 19259 --seed 0 --threads 1 "
-                  "--out ~/.cache/coursekit/heads/pusht_flow_state_tp32 (data: coursekit collect pusht --episodes 400 "
-                  "--seed 0 --action-noise 0,5)"),
 }
 DELAYS = (0, 1, 2, 4, 8)
 STRATEGY_NAMES = tuple(STRATEGIES)  # sync, async, ensemble, rtc
@@ -74,8 +67,8 @@ def _csv(text: str, allowed: tuple | None, kind: type = str) -> list:
 
 def missing_head(name: str) -> str:
     """Why the head ``name`` is skipped, and how to make it when it is not shipped."""
-    where = f"{CKPT / HEADS[name][0]}" + (f" nor {TRAINED_HEADS / HEADS[name][0]}" if name in TRAIN_COMMANDS else "")
-    how = f" (train it: {TRAIN_COMMANDS[name]})" if name in TRAIN_COMMANDS else ""
+    where = f"{CKPT / HEADS[name][0]}" + (f" nor {TRAINED_HEADS / HEADS[name][0]}" if name in TRAINED else "")
+    how = f" (train it: {train_command(name)})" if name in TRAINED else ""
     return f"{name}: no checkpoint {where}{how}, skipped"
 
 

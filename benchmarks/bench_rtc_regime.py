@@ -29,10 +29,10 @@ import os
 
 import numpy as np
 
-from benchmarks.bench_latency import (HEADS, SECTION, TRAIN_COMMANDS, evaluate_blocks, load_head, mean_smoothness,
-                                      missing_head, pusht_score)
+from benchmarks.bench_latency import HEADS, SECTION, evaluate_blocks, load_head, mean_smoothness, missing_head, pusht_score
 from benchmarks.protocol import PROTOCOL_START, VALIDATION_START
 from benchmarks import results
+from benchmarks.train_head import HEADS as TRAINED, command as train_command
 
 COMMAND = ".venv/bin/python -m benchmarks.bench_rtc_regime"
 STRATEGIES = ("async", "rtc")
@@ -64,7 +64,7 @@ def sweep_point(policy, name: str, strategy: str, d: int, args: argparse.Namespa
     val_seeds = list(range(VALIDATION_START, VALIDATION_START + args.val_episodes))
     cmd = (f"{COMMAND} --heads {name} --strategies {strategy} --d {d} --points {args.points} "
            f"--val-episodes {args.val_episodes} --episodes {args.episodes} --block {args.block}")
-    trained = f"; head trained by: {TRAIN_COMMANDS[name]}" if name in TRAIN_COMMANDS else ""
+    trained = f"; head trained by: {train_command(name)}" if name in TRAINED else ""
     val = {}
     for s in grid:
         value, interval, n, span = pusht_score(evaluate_blocks(policy, name, strategy, d, val_seeds, args, s))
