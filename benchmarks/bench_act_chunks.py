@@ -1,0 +1,170 @@
+"""Compounding error on the arm pair: ACT's chunk size k swept, and ACT without its CVAE.
+
+The second claim of the text (§10.2): predicting a chunk of k actions and executing it shortens
+the effective horizon of the task by k, which dampens the compounding error of a single-step
+policy (ACT, Zhao et al. 2023, Sec. 3.3; its Fig. 8a: success collapses at k = 1 on the simulated
+tasks). And "ACT uses its latent lightly": the same network without the CVAE encoder (z absent,
+the L1 loss alone; ACT's own ablation, Sec. 5) on the same protocol.
+
+    .venv/bin/python -m benchmarks.bench_act_chunks --steps 7000 --train-seeds 0 1 2 --threads 1
+    .venv/bin/python -m benchmarks.bench_act_chunks --steps 20 --train-seeds 0 --episodes 2 --variants "ACT k=10" --no-record  # smoke
+
+Every variant (:data:`VARIANTS`) is ACT with the "cpu" recipe on the same 50 scripted
+transfer-cube demonstrations (seeds 0-49), the same step budget (the shipped ACT transfer-cube
+checkpoint trained 7173 steps in all), each training seed of ``--train-seeds``; evaluated on the
+protocol seeds (100000-100199) with two executors: open-loop chunks (Ta = k: the k actions of a
+chunk executed before the next observation, the setting of the paper's k sweep) and temporal
+ensembling (m = 0.01, ACT's own executor). At k = 1 the two are the same single-step policy, so
+only the first is run. A row per (variant, executor): strict success pooled over training seeds
+(n = seeds x episodes) with a Wilson 95 % interval, the per-seed rates and a t-interval over
+training seeds in the note.
+
+Runs and evaluations are cached under ``--out`` (never the repository) and resume: training from
+its state file (``coursekit.train_state``, rewritten every minute), evaluation per block of 50 seeds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.protocol import add_protocol_args, protocol_seeds, t_estimate
+
+SECTION = "Chunk ablation (arm pair)"
+COMMAND = ".venv/bin/python -m benchmarks.bench_act_chunks"
+TASK, N_DEMOS = "transfer_cube", 50
+VARIANTS = {  # name -> ACT config fields
+    "ACT k=1": {"chunk_size": 1},
+    "ACT k=10": {"chunk_size": 10},
+    "ACT k=25": {"chunk_size": 25},
+    "ACT k=100": {"chunk_size": 100},
+    "ACT k=100 without CVAE": {"chunk_size": 100, "use_vae": False},
+}
+EXECUTORS = ("open-loop chunks (Ta=k)", "temporal ensembling m=0.01")
+BLOCK = 50
+"""Seeds per cached evaluation block (the unit an interrupted evaluation resumes from)."""
+CACHE = Path(os.environ.get("XDG_CACHE_HOME", "~/.cache")).expanduser() / "coursekit" / "act_chunks"
+
+
+def demonstrations(out: Path):
+    """The 50 scripted transfer-cube demonstrations (seeds 0-49), collected once into ``out``."""
+    from coursekit.data import EpisodeDataset
+    from coursekit.tasks import get_task
+
+    path = out / f"aloha_{TASK}_{N_DEMOS}ep_seed0.npz"
+    if path.exists():
+        return EpisodeDataset.load(path)
+    ds = get_task(TASK).collect(N_DEMOS, 0, progress=False)
+    ds.save(path)
+    return ds
+
+
+def train_or_load(name: str, ts: int, args: argparse.Namespace, dataset):
+    """The variant ``name`` trained with seed ``ts`` for ``--steps`` (resumed or loaded from ``--out``)."""
+    import torch
+
+    from coursekit.checkpoint import CheckpointSaver, load_checkpoint
+    from coursekit.policies import make_policy
+    from coursekit.train import TrainConfig, train
+
+    slug = re.sub(r"[^a-z0-9]+", "-", name.lower()).strip("-")
+    run = args.out / f"{slug}_seed{ts}_s{args.steps}"
+    if (run / "config.json").exists():
+        return load_checkpoint(run, device="cpu"), run
+    policy, batches, recipe = make_policy("act", dataset, recipe="cpu", seed=ts, **VARIANTS[name])
+    torch.manual_seed(ts)
+    state = args.out / f".{run.name}.state.pt"  # removed once the checkpoint is written
+    config = TrainConfig(**{**recipe, "max_steps": args.steps, "seed": ts, "num_threads": args.threads,
+                            "progress": False, "checkpoint_every_minutes": None})
+    result = train(policy, batches, config, callbacks=[CheckpointSaver(run, dataset_meta=dataset.meta)],
+                   state_file=state)
+    state.unlink(missing_ok=True)
+    return result.policy, run
+
+
+def executor_factory(executor: str, k: int):
+    from coursekit.execution.ensembling import TemporalEnsemble
+    from coursekit.execution.receding import RecedingHorizon
+
+    if executor == EXECUTORS[0]:
+        return lambda predict_chunk: RecedingHorizon(predict_chunk, 1, k)
+    return lambda predict_chunk: TemporalEnsemble(predict_chunk, 1, ensemble_decay=0.01)
+
+
+def evaluate_run(policy, run: Path, executor: str, seeds: list[int], dataset_meta: dict) -> dict:
+    """Strict success and highest stage per seed, evaluated in cached blocks of ``BLOCK`` seeds."""
+    from coursekit.evaluate import evaluate_aloha
+
+    tag = "open" if executor == EXECUTORS[0] else "te"
+    out = {"seed": [], "strict": [], "stage": [], "seconds": 0.0}
+    for i in range(0, len(seeds), BLOCK):
+        block = seeds[i:i + BLOCK]
+        path = run / f"eval_{tag}_{block[0]}_{len(block)}.json"
+        if not path.exists():
+            r = evaluate_aloha(policy, TASK, seeds=block, executor_factory=executor_factory(executor, policy.config.chunk_size),
+                               dataset_meta=dataset_meta, progress=False)
+            part = {"seed": block, "strict": (r.states[:, -1, 1] > 0.5).tolist(),
+                    "stage": r.states[:, :, 0].max(axis=1).astype(int).tolist(), "seconds": r.seconds}
+            tmp = path.with_suffix(".tmp")
+            tmp.write_text(json.dumps(part))
+            tmp.replace(path)
+        part = json.loads(path.read_text())
+        for key in ("seed", "strict", "stage"):
+            out[key] += part[key]
+        out["seconds"] += part["seconds"]
+    return out
+
+
+def summarise(name: str, executor: str, per_seed: dict[int, dict], args: argparse.Namespace, record) -> None:
+    """One row: strict success pooled over training seeds, Wilson interval; per-seed rates in the note."""
+    from coursekit.stats import wilson_interval
+
+    strict = np.concatenate([np.asarray(e["strict"], dtype=bool) for e in per_seed.values()])
+    rates = [float(np.mean(e["strict"])) for e in per_seed.values()]
+    lo, hi = wilson_interval(int(strict.sum()), strict.size)
+    _, tlo, thi = t_estimate(rates)
+    stages = np.concatenate([e["stage"] for e in per_seed.values()])
+    seeds = sorted(per_seed)
+    note = (f"training seeds {seeds} (per seed: {', '.join(f'{100 * r:.1f} %' for r in rates)}; t-interval over "
+            f"seeds [{100 * tlo:.1f}, {100 * thi:.1f}] %); {len(strict) // len(seeds)} protocol seeds each; stages 1-4 "
+            f"reached: {', '.join(f'{np.mean(stages >= s):.2f}' for s in range(1, 5))}; {N_DEMOS} scripted demos, "
+            f"recipe cpu, {args.steps} steps, {args.threads} thread(s)")
+    print(f"{name}, {executor}: {100 * strict.mean():.1f} % [{100 * lo:.1f}, {100 * hi:.1f}] (n={strict.size}); {note}")
+    cmd = (f"{COMMAND} --steps {args.steps} --train-seeds {' '.join(map(str, seeds))} --threads {args.threads} "
+           f"--variants '{name}'")
+    record(SECTION, f"{name}, {executor}: strict success", round(100 * float(strict.mean()), 1), "%", cmd,
+           interval=[round(100 * lo, 1), round(100 * hi, 1)], n=int(strict.size), note=note,
+           seeds=f"{min(e['seed'][0] for e in per_seed.values())}-{max(e['seed'][-1] for e in per_seed.values())}")
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--steps", type=int, default=7000, help="optimiser steps per run (step-matched)")
+    parser.add_argument("--train-seeds", type=int, nargs="+", default=[0, 1, 2], help="training seeds per variant")
+    parser.add_argument("--variants", nargs="+", default=list(VARIANTS), help=f"of {list(VARIANTS)}")
+    parser.add_argument("--out", type=Path, default=CACHE, help="runs and evaluations (resumable)")
+    add_protocol_args(parser)
+    args = parser.parse_args(argv)
+    bad = [v for v in args.variants if v not in VARIANTS]
+    if bad or args.steps < 1:
+        raise SystemExit(f"bad --variants {bad} (expected some of {list(VARIANTS)}) or --steps {args.steps} (>= 1)")
+    seeds = protocol_seeds(args)
+    args.out.mkdir(parents=True, exist_ok=True)
+    from benchmarks.results import record as write
+
+    record = (lambda *a, **k: None) if args.no_record else write
+    dataset = demonstrations(args.out)
+    for name in args.variants:
+        policies = {ts: train_or_load(name, ts, args, dataset) for ts in args.train_seeds}
+        for executor in EXECUTORS[:1] if VARIANTS[name]["chunk_size"] == 1 else EXECUTORS:
+            per_seed = {ts: evaluate_run(p, run, executor, seeds, dataset.meta) for ts, (p, run) in policies.items()}
+            summarise(name, executor, per_seed, args, record)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,39 @@
+"""benchmarks/bench_act_chunks.py: the k sweep's rows (pooled strict success, Wilson interval) and its cache."""
+
+from __future__ import annotations
+
+import pytest
+
+import benchmarks.bench_act_chunks as bac
+from coursekit.stats import wilson_interval
+
+
+def test_variants_are_the_issues_k_grid_and_the_cvae_ablation():
+    assert [v["chunk_size"] for v in bac.VARIANTS.values()] == [1, 10, 25, 100, 100]
+    assert [v.get("use_vae", True) for v in bac.VARIANTS.values()] == [True] * 4 + [False]
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(600)
+def test_a_tiny_sweep_records_wilson_rows_and_reuses_its_cache(tmp_path, monkeypatch):
+    import benchmarks.results
+
+    rows = []
+    monkeypatch.setattr(bac, "N_DEMOS", 2)
+    monkeypatch.setattr(benchmarks.results, "record", lambda *a, **k: rows.append((a, k)))
+    argv = ["--steps", "2", "--train-seeds", "0", "--episodes", "1", "--variants", "ACT k=10", "--out", str(tmp_path)]
+    bac.main(argv)
+    names = [a[1] for a, _ in rows]
+    assert names == [f"ACT k=10, {e}: strict success" for e in bac.EXECUTORS]
+    for (_, _, value, unit, cmd), k in rows:
+        successes = round(value / 100 * k["n"])
+        assert unit == "%" and k["n"] == 1 and k["seeds"] == "100000-100000"
+        assert k["interval"] == [round(100 * x, 1) for x in wilson_interval(successes, k["n"])]
+        assert "--variants 'ACT k=10'" in cmd and "--steps 2" in cmd
+    evals = sorted(tmp_path.glob("act-k-10_seed0_s2/eval_*.json"))
+    assert [p.name for p in evals] == ["eval_open_100000_1.json", "eval_te_100000_1.json"]
+    stamps = [p.stat().st_mtime_ns for p in evals]
+    rows.clear()
+    bac.main(argv)  # everything cached: same rows, nothing re-evaluated
+    assert [a[1] for a, _ in rows] == names and [p.stat().st_mtime_ns for p in evals] == stamps
+    assert not list(tmp_path.glob(".*.state.pt")), "the resume state outlived its run"
