@@ -43,7 +43,7 @@ class RecordAdapter:
         if world is not None and world != own:
             raise ValueError(f"policy features {self.features!r} are for the {world!r} world, not {self.task!r} "
                              f"(whose features are {own!r}); evaluate it on its own task")
-        self.image_size = tuple(c.vision.image_size) if getattr(c, "obs_type", "low_dim") == "image" else None
+        self.image_size = tuple(c.vision.input_size) if getattr(c, "obs_type", "low_dim") == "image" else None
         if self.image_size is not None and self.record.image_env_kwargs is None:
             raise ValueError(f"policy features {self.features!r} read camera images, but task {self.task!r} has none")
 

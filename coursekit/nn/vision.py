@@ -36,7 +36,11 @@ class VisionEncoderConfig:
     in_channels: int = 3
     """Image channels (3 for RGB)."""
     image_size: tuple[int, int] = (96, 96)
-    """Input (H, W) before cropping."""
+    """(H, W) the encoder works at, before cropping."""
+    frame_size: tuple[int, int] | None = None
+    """(H, W) of the camera frames given, when larger than ``image_size``: each frame is first resized
+    to ``image_size`` by area averaging (96 -> 48: each pixel the mean of a 2x2 block). None: the
+    frames are ``image_size``. Departure: Diffusion Policy encodes its 96x96 frames at full size."""
     crop_size: tuple[int, int] = (84, 84)
     """Crop (h, w): random in train(), centred in eval(); equal to image_size for no crop."""
     widths: tuple[int, ...] = (32, 64, 128, 256)
@@ -53,6 +57,11 @@ class VisionEncoderConfig:
     def __post_init__(self) -> None:
         object.__setattr__(self, "image_size", _pair(self.image_size, "image_size"))
         object.__setattr__(self, "crop_size", _pair(self.crop_size, "crop_size"))
+        if self.frame_size is not None:
+            object.__setattr__(self, "frame_size", _pair(self.frame_size, "frame_size"))
+            if any(i > f for i, f in zip(self.image_size, self.frame_size)):
+                raise ValueError(f"image_size {self.image_size} must fit in frame_size {self.frame_size} "
+                                 f"(frames are only ever shrunk)")
         object.__setattr__(self, "widths", tuple(self.widths))
         if any(c > s for c, s in zip(self.crop_size, self.image_size)):
             raise ValueError(f"crop_size {self.crop_size} must fit in image_size {self.image_size}")
@@ -63,6 +72,11 @@ class VisionEncoderConfig:
             v = getattr(self, name)
             if not isinstance(v, int) or v < 1:
                 raise ValueError(f"{name} must be a positive int, got {v!r}")
+
+    @property
+    def input_size(self) -> tuple[int, int]:
+        """(H, W) of the frames the encoder takes: ``frame_size``, else ``image_size``."""
+        return self.frame_size if self.frame_size is not None else self.image_size
 
     @classmethod
     def preset(cls, name: str) -> "VisionEncoderConfig":
@@ -204,9 +218,11 @@ class VisionEncoder(nn.Module):
 
     def forward(self, images: torch.Tensor, generator: torch.Generator | None = None) -> torch.Tensor:
         cfg = self.config
-        if images.ndim != 4 or images.shape[1] != cfg.in_channels or tuple(images.shape[-2:]) != cfg.image_size:
-            raise ValueError(f"images must be (B, {cfg.in_channels}, {cfg.image_size[0]}, {cfg.image_size[1]}), "
+        if images.ndim != 4 or images.shape[1] != cfg.in_channels or tuple(images.shape[-2:]) != cfg.input_size:
+            raise ValueError(f"images must be (B, {cfg.in_channels}, {cfg.input_size[0]}, {cfg.input_size[1]}), "
                              f"got {tuple(images.shape)}")
+        if cfg.input_size != cfg.image_size:
+            images = F.interpolate(images, size=cfg.image_size, mode="area")  # (B, C, *image_size)
         if cfg.crop_size != cfg.image_size:
             images = random_crop(images, cfg.crop_size, generator) if self.training \
                 else center_crop(images, cfg.crop_size)  # (B, C, h, w)

@@ -126,6 +126,9 @@ class ACTConfig:
             self.vision = VisionEncoderConfig(crop_size=VisionEncoderConfig().image_size)  # ACT: no crop
         if self.obs_type == "low_dim" and self.vision is not None:
             raise ValueError(f"ACTConfig.vision given for obs_type 'low_dim': {self.vision!r}")
+        if self.vision is not None and self.vision.frame_size is not None:  # ACT's trunk reads image_size frames
+            raise ValueError(f"ACTConfig.vision.frame_size must be None (ACT encodes frames at image_size "
+                             f"{self.vision.image_size}), got {self.vision.frame_size!r}")
 
     @property
     def n_obs_steps(self) -> int:

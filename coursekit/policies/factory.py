@@ -61,7 +61,7 @@ def make_policy(policy_type: str, dataset: Any, *, features: str | None = None, 
     cfg = cls.make_config(features=features, obs_type=spec.obs_type, obs_dim=int(low.shape[-1]),
                           action_dim=int(dataset["action"].shape[-1]), **config)
     vision = getattr(cfg, "vision", None)
-    obs, action = training_arrays(dataset, features, **({"image_size": vision.image_size} if vision else {}))
+    obs, action = training_arrays(dataset, features, **({"image_size": vision.input_size} if vision else {}))
     with torch.random.fork_rng(devices=[]):  # seeded init without disturbing the caller's generator
         torch.manual_seed(seed)
         policy = cls(cfg)

@@ -152,7 +152,7 @@ class UNetChunkPolicy(ChunkPolicy):
                              f"or (To, Do), got {tuple(obs_history[low_key].shape)}")
         if c.obs_type == "image":
             img = out["image"]
-            want = (c.n_obs_steps, c.vision.in_channels, *c.vision.image_size)
+            want = (c.n_obs_steps, c.vision.in_channels, *c.vision.input_size)
             if img.ndim != 5 or tuple(img.shape[1:]) != want or img.shape[0] != low.shape[0]:
                 raise ValueError(f"observation 'image' must have shape (B, {', '.join(map(str, want))}) "
                                  f"(uint8 0..255 or float in [0, 1]), got {tuple(img.shape)}")
