@@ -14,7 +14,9 @@ reported seeds. Rows, in the "Latency budget" section:
 
 - "<head>, <strategy>, d=<d>, s=<s>: validation score" (n and seed range in the row),
 - "<head>, <strategy>, d=<d>, best s: score" (the s chosen and the grid in the note), and its
-  smoothness row.
+  smoothness row;
+- "<head>, d=<d>, best s: rtc minus async score" when both strategies ran: the paired difference
+  per protocol seed, each strategy at its own best s (bootstrap 95 % interval).
 
 Every point is evaluated in cached blocks (``bench_latency``'s cache), so an interrupted sweep
 resumes where it stopped. For example (about an hour per head and strategy on one core)::
@@ -51,8 +53,10 @@ def regime_grid(d: int, horizon: int, points: int = 4, own: int | None = None) -
     return sorted(grid)
 
 
-def sweep_point(policy, name: str, strategy: str, d: int, args: argparse.Namespace) -> None:
-    """Validation sweep over s for one (head, strategy, d), then the chosen s on the protocol seeds."""
+def sweep_point(policy, name: str, strategy: str, d: int, args: argparse.Namespace) -> dict | None:
+    """Validation sweep over s for one (head, strategy, d), then the chosen s on the protocol seeds.
+
+    Returns {"s": the chosen s, "parts": its evaluated protocol blocks, "cmd"}, or None outside the regime."""
     record = (lambda *a, **k: None) if args.no_record else results.record
     label = HEADS[name][3]
     H = policy.execution_spec().usable_horizon
@@ -60,7 +64,7 @@ def sweep_point(policy, name: str, strategy: str, d: int, args: argparse.Namespa
     grid = regime_grid(d, H, args.points, own)
     if not grid:
         print(f"{label} d={d}: no s with d <= s <= H - d = {H - d}: skipped")
-        return
+        return None
     val_seeds = list(range(VALIDATION_START, VALIDATION_START + args.val_episodes))
     cmd = (f"{COMMAND} --heads {name} --strategies {strategy} --d {d} --points {args.points} "
            f"--val-episodes {args.val_episodes} --episodes {args.episodes} --block {args.block}")
@@ -87,6 +91,28 @@ def sweep_point(policy, name: str, strategy: str, d: int, args: argparse.Namespa
            f"s = {best}: jump at switches {smooth['switch_jump']:.1f} px (other steps {smooth['other_step']:.1f}), "
            f"max jerk {smooth['max_jerk']:.1f} px/step^3", "", cmd, note=note + "; means over episodes", n=n, seeds=span)
     print(f"{label} {strategy} d={d}: best s = {best} of {grid} -> {value:.3f} [{interval[0]:.3f}, {interval[1]:.3f}]")
+    return {"s": best, "parts": parts, "cmd": cmd}
+
+
+def paired_difference(name: str, d: int, rtc: dict, naive: dict, no_record: bool) -> None:
+    """RTC minus naive async, each at its own best s, paired by protocol seed (bootstrap 95 % interval)."""
+    from coursekit.stats import mean_estimate
+
+    def by_seed(point: dict) -> dict[int, float]:
+        return {s: r for p in point["parts"] for s, r in zip(p["seeds"], p["max_reward"])}
+
+    a, b = by_seed(rtc), by_seed(naive)
+    seeds = sorted(set(a) & set(b))
+    est = mean_estimate([a[s] - b[s] for s in seeds])
+    label = HEADS[name][3]
+    cmd = rtc["cmd"].replace("--strategies rtc", "--strategies rtc,async")
+    note = (f"paired by protocol seed ({len(seeds)} seeds, same sampling seed); RTC at s = {rtc['s']}, naive async at "
+            f"s = {naive['s']}, each chosen on validation seeds; bootstrap 95 % interval of the mean difference")
+    print(f"{label} d={d}: rtc minus async {est.value:+.3f} [{est.lo:+.3f}, {est.hi:+.3f}]")
+    if not no_record:
+        results.record(SECTION, f"{label}, d={d}, best s: rtc minus async score", round(est.value, 3), "", cmd,
+                       interval=(round(est.lo, 3), round(est.hi, 3)), n=est.n,
+                       seeds=f"{seeds[0]}-{seeds[-1]}", note=note)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -122,11 +148,15 @@ def main(argv: list[str] | None = None) -> None:
         if policy is None:
             print(missing_head(name))
             continue
+        best = {}  # (strategy, d) -> sweep_point's result
         for strategy in strategies:
             if strategy == "rtc" and not hasattr(policy, "predict_inpainted"):
                 continue  # RTC guides an iterative sampler: not ACT
             for d in delays:
-                sweep_point(policy, name, strategy, d, args)
+                best[strategy, d] = sweep_point(policy, name, strategy, d, args)
+        for d in delays:
+            if best.get(("rtc", d)) and best.get(("async", d)):
+                paired_difference(name, d, best["rtc", d], best["async", d], args.no_record)
 
 
 if __name__ == "__main__":
