@@ -1,0 +1,135 @@
+"""From pixels on a CPU (chapter 12): the two-stage route, measured part by part.
+
+Diffusion Policy's image recipe trains a ResNet-18 end to end from the denoising loss: on this
+CPU that is hours per thousand steps (``bench_pixels``). The two-stage route spends the budget
+differently: (1) pre-train a small encoder to read the block's keypoints from a frame (the
+simulator gives them for free: ``coursekit.nn.vision_pretrain``), (2) train Diffusion Policy on
+the frozen encoder's features, (3) optionally fine-tune end to end. Parts (``--only``):
+
+- ``pretrain``: stage 1 on the frames of the shipped models' 400 demonstrations (rendered from the
+  stored states at 96x96 by the env's own renderer; no caching: ~15 s), episodes 0-359 for
+  training and 360-399 held out. Rows: the held-out keypoint error in world pixels (the PushT
+  world is 512 px wide; the block's keypoints are 8 polygon corners), the training throughput,
+  and the steps and seconds. The encoder is saved under ``--out`` for stage 2.
+
+    .venv/bin/python -m benchmarks.bench_pixel_policy --only pretrain --pretrain-steps 3000 --threads 1
+    .venv/bin/python -m benchmarks.bench_pixel_policy --only pretrain --pretrain-steps 5 --episodes-limit 12 --no-record  # smoke
+
+The encoder (:data:`ENCODER`) takes 96x96 frames and works at 48x48 (area resize), random 42x42
+crops in training: a departure from the paper's 84x84 crops of full-size frames, chosen from the
+throughput rows of ``bench_pixels``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.bench_chunk_ablation import DATA
+
+SECTION = "Pixels (PushT): two-stage route"
+COMMAND = ".venv/bin/python -m benchmarks.bench_pixel_policy"
+CACHE = Path(os.environ.get("XDG_CACHE_HOME", "~/.cache")).expanduser() / "coursekit" / "pixels"
+HELD_OUT = 40
+"""The last episodes of the data set, never trained on by stage 1 (its keypoint error is measured there)."""
+
+
+def encoder_config():
+    from coursekit.nn.vision import VisionEncoderConfig
+
+    return VisionEncoderConfig(widths=(16, 32, 64, 128), blocks_per_stage=1, image_size=48, crop_size=42,
+                               frame_size=96, num_keypoints=32, feature_dim=64)
+
+
+def frames_and_keypoints(data: Path, limit: int | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(N, 3, 96, 96) uint8 frames, (N, 16) block keypoints in world px, (N,) episode index."""
+    from coursekit.data.episodes import EpisodeDataset
+    from coursekit.data.features import pusht_keypoint_features, training_arrays
+
+    ds = EpisodeDataset.load(data)
+    ends = np.asarray(ds.episode_ends)
+    if limit is not None:  # the first ``limit`` episodes (smoke runs)
+        ends = ends[:limit]
+        ds = EpisodeDataset({k: v[:ends[-1]] for k, v in ds.arrays.items()}, ends, ds.meta)
+    arrays, _ = training_arrays(ds, "pusht_image", image_size=(96, 96))
+    keypoints = pusht_keypoint_features(np.asarray(ds["state"]))[:, 2:]  # (N, 2K): the block's, not the agent's
+    episode = np.searchsorted(ends, np.arange(len(keypoints)), side="right")  # (N,)
+    return arrays["image"], keypoints.astype(np.float32), episode
+
+
+def part_pretrain(args: argparse.Namespace, record) -> None:
+    import torch
+
+    from coursekit.nn.vision import VisionEncoder
+    from coursekit.nn.vision_pretrain import PretrainConfig, predict_targets, pretrain_encoder
+
+    t0 = time.perf_counter()
+    frames, keypoints, episode = frames_and_keypoints(args.data, args.episodes_limit)
+    render_s = time.perf_counter() - t0
+    held = episode >= episode.max() + 1 - HELD_OUT if args.episodes_limit is None else episode >= episode.max()
+    torch.manual_seed(args.seed)
+    encoder = VisionEncoder(encoder_config())
+    config = PretrainConfig(steps=args.pretrain_steps, batch_size=args.batch_size, seed=args.seed)
+    t1 = time.perf_counter()
+    out = pretrain_encoder(encoder, frames[~held], keypoints[~held], config)
+    train_s = time.perf_counter() - t1
+    pred = predict_targets(encoder, out["readout"], out["mean"], out["std"], frames[held])  # (n, 2K)
+    err = np.linalg.norm((pred - keypoints[held]).reshape(len(pred), -1, 2), axis=-1)  # (n, K) world px
+    per_frame = err.mean(1)  # (n,)
+    from coursekit.stats import mean_estimate
+
+    est = mean_estimate(per_frame)
+    images_s = config.steps * config.batch_size / train_s
+    print(f"stage 1: {len(frames)} frames rendered in {render_s:.0f} s; {config.steps} steps in {train_s:.0f} s "
+          f"({images_s:.0f} images/s); held-out keypoint error {est.value:.1f} px [{est.lo:.1f}, {est.hi:.1f}] "
+          f"(median {np.median(per_frame):.1f}, n={est.n} frames of {len(np.unique(episode[held]))} episodes)")
+    path = args.out / f"encoder_pretrained_s{config.steps}_seed{args.seed}.pt"
+    if not args.no_record:
+        args.out.mkdir(parents=True, exist_ok=True)
+        torch.save({"encoder": encoder.state_dict(), "config": json.dumps(encoder.config.__dict__, default=list),
+                    "readout": out["readout"].state_dict(), "mean": out["mean"], "std": out["std"]}, path)
+    cmd = f"{COMMAND} --only pretrain --pretrain-steps {config.steps} --batch-size {config.batch_size} --threads {args.threads}"
+    note = (f"8 block keypoints (world px, 512 px wide world), mean distance per frame over the frames of the last "
+            f"{len(np.unique(episode[held]))} of {episode.max() + 1} demonstrations (never trained on); encoder 16-128 one block per stage, "
+            f"96x96 frames at 48x48, 42x42 crops; {config.steps} steps of batch {config.batch_size}, seed {args.seed}; "
+            f"1-min load {os.getloadavg()[0]:.1f}")
+    record(SECTION, "stage 1: held-out block keypoint error", round(est.value, 2), "px", cmd,
+           interval=(round(est.lo, 2), round(est.hi, 2)), n=est.n, note=note)
+    record(SECTION, "stage 1: training throughput", round(images_s), "images/s", cmd,
+           note=f"{train_s:.0f} s for {config.steps} steps on {torch.get_num_threads()} thread(s); {note}")
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--only", nargs="+", choices=["pretrain"], default=["pretrain"], help="parts to run")
+    parser.add_argument("--data", type=Path, default=DATA, help=f"demonstrations (default {DATA})")
+    parser.add_argument("--pretrain-steps", type=int, default=3000, help="stage-1 optimiser steps")
+    parser.add_argument("--batch-size", type=int, default=128, help="frames per stage-1 step")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the encoder, batches and crops")
+    parser.add_argument("--episodes-limit", type=int, default=None, help="use the first N episodes (smoke runs)")
+    parser.add_argument("--threads", type=int, default=1, help="torch threads")
+    parser.add_argument("--out", type=Path, default=CACHE, help="trained encoders (never the repository)")
+    parser.add_argument("--no-record", action="store_true", help="print only")
+    args = parser.parse_args(argv)
+    if not args.data.is_file():
+        raise SystemExit(f"--data {args.data} does not exist (make it with: coursekit collect pusht --episodes 400 "
+                         f"--seed 0 --action-noise 0,5 --out {args.data})")
+    if min(args.pretrain_steps, args.batch_size, args.threads) < 1 or (args.episodes_limit or 2) < 2:
+        raise SystemExit("--pretrain-steps, --batch-size, --threads must be >= 1 and --episodes-limit >= 2")
+    import torch
+
+    from benchmarks.results import record as write
+
+    torch.set_num_threads(args.threads)
+    record = (lambda *a, **k: None) if args.no_record else write
+    if "pretrain" in args.only:
+        part_pretrain(args, record)
+
+
+if __name__ == "__main__":
+    main()

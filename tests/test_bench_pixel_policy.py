@@ -1,0 +1,45 @@
+"""benchmarks/bench_pixel_policy.py: stage 1 measures its keypoint error on episodes it never trained on."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import benchmarks.bench_pixel_policy as bpp
+
+
+@pytest.fixture(scope="module")
+def demos(tmp_path_factory):
+    from coursekit.experts.pusht_planner import collect_dataset
+
+    path = tmp_path_factory.mktemp("data") / "demos.npz"
+    collect_dataset(3, 0, progress=False).save(path)
+    return path
+
+
+def test_frames_and_keypoints_line_up(demos):
+    from coursekit.data.episodes import EpisodeDataset
+    from coursekit.envs.pusht_render import PushTRenderer
+
+    frames, keypoints, episode = bpp.frames_and_keypoints(demos, None)
+    ds = EpisodeDataset.load(demos)
+    assert frames.shape == (ds.n_steps, 3, 96, 96) and frames.dtype == np.uint8
+    assert keypoints.shape == (ds.n_steps, 16)  # 8 corners of the T, (x, y) each
+    assert np.array_equal(np.bincount(episode), ds.episode_lengths)
+    i = int(ds.episode_ends[0])  # the first frame of episode 1 is its own state's picture
+    assert np.array_equal(frames[i], PushTRenderer((96, 96)).render(ds["state"][i]).transpose(2, 0, 1))
+
+
+def test_pretrain_rows_are_measured_on_the_held_out_episode(demos, tmp_path, monkeypatch):
+    import benchmarks.results
+
+    rows = []
+    monkeypatch.setattr(benchmarks.results, "record", lambda *a, **k: rows.append((a, k)))
+    bpp.main(["--only", "pretrain", "--pretrain-steps", "2", "--batch-size", "8", "--episodes-limit", "3",
+              "--data", str(demos), "--out", str(tmp_path)])
+    (err, err_kw), (speed, _) = rows
+    _, _, episode = bpp.frames_and_keypoints(demos, 3)
+    assert err[1] == "stage 1: held-out block keypoint error" and err[3] == "px"
+    assert err_kw["n"] == int(np.sum(episode == 2)) and err_kw["interval"][0] <= err[2] <= err_kw["interval"][1]
+    assert speed[3] == "images/s" and speed[2] > 0
+    assert [p.name for p in tmp_path.iterdir()] == ["encoder_pretrained_s2_seed0.pt"]
