@@ -11,9 +11,16 @@ the frozen encoder's features, (3) optionally fine-tune end to end. Parts (``--o
   training and 360-399 held out. Rows: the held-out keypoint error in world pixels (the PushT
   world is 512 px wide; the block's keypoints are 8 polygon corners), the training throughput,
   and the steps and seconds. The encoder is saved under ``--out`` for stage 2.
+- ``policy``: Diffusion Policy on ``pusht_image`` features (To = 2 frames of 96x96 + the pusher's
+  position; no block pose), recipe cpu, ``--policy-steps`` optimiser steps (resumable), with the
+  encoder of ``--route``: ``two-stage`` (stage 1's encoder, frozen) or ``end-to-end`` (trained from
+  scratch by the denoising loss, as in the paper); then scored on the 200 protocol seeds through
+  the same evaluation as ``coursekit eval``. Rows: the score with its interval, and the training
+  samples/s and seconds (equal CPU budgets compare routes by seconds, not steps).
 
     .venv/bin/python -m benchmarks.bench_pixel_policy --only pretrain --pretrain-steps 3000 --threads 1
     .venv/bin/python -m benchmarks.bench_pixel_policy --only pretrain --pretrain-steps 5 --episodes-limit 12 --no-record  # smoke
+    .venv/bin/python -m benchmarks.bench_pixel_policy --only policy --route two-stage --policy-steps 19259 --threads 1
 
 The encoder (:data:`ENCODER`) takes 96x96 frames and works at 48x48 (area resize), random 42x42
 crops in training: a departure from the paper's 84x84 crops of full-size frames, chosen from the
@@ -89,10 +96,9 @@ def part_pretrain(args: argparse.Namespace, record) -> None:
           f"({images_s:.0f} images/s); held-out keypoint error {est.value:.1f} px [{est.lo:.1f}, {est.hi:.1f}] "
           f"(median {np.median(per_frame):.1f}, n={est.n} frames of {len(np.unique(episode[held]))} episodes)")
     path = args.out / f"encoder_pretrained_s{config.steps}_seed{args.seed}.pt"
-    if not args.no_record:
-        args.out.mkdir(parents=True, exist_ok=True)
-        torch.save({"encoder": encoder.state_dict(), "config": json.dumps(encoder.config.__dict__, default=list),
-                    "readout": out["readout"].state_dict(), "mean": out["mean"], "std": out["std"]}, path)
+    args.out.mkdir(parents=True, exist_ok=True)
+    torch.save({"encoder": encoder.state_dict(), "config": json.dumps(encoder.config.__dict__, default=list),
+                "readout": out["readout"].state_dict(), "mean": out["mean"], "std": out["std"]}, path)  # the cache
     cmd = f"{COMMAND} --only pretrain --pretrain-steps {config.steps} --batch-size {config.batch_size} --threads {args.threads}"
     note = (f"8 block keypoints (world px, 512 px wide world), mean distance per frame over the frames of the last "
             f"{len(np.unique(episode[held]))} of {episode.max() + 1} demonstrations (never trained on); encoder 16-128 one block per stage, "
@@ -104,9 +110,68 @@ def part_pretrain(args: argparse.Namespace, record) -> None:
            note=f"{train_s:.0f} s for {config.steps} steps on {torch.get_num_threads()} thread(s); {note}")
 
 
+def _pixel_policy(args: argparse.Namespace, dataset):
+    """A fresh image DP with the route's encoder: (policy, batches, recipe)."""
+    import torch
+
+    from coursekit.nn.vision_pretrain import freeze
+    from coursekit.policies import make_policy
+
+    policy, batches, recipe = make_policy("diffusion", dataset, features="pusht_image", recipe="cpu", seed=args.seed,
+                                          vision=encoder_config())
+    if args.route == "two-stage":
+        path = args.out / f"encoder_pretrained_s{args.pretrain_steps}_seed{args.seed}.pt"
+        if not path.is_file():
+            raise SystemExit(f"no stage-1 encoder {path}: run --only pretrain --pretrain-steps {args.pretrain_steps} first")
+        policy.vision_encoder.load_state_dict(torch.load(path, weights_only=False)["encoder"])
+        freeze(policy.vision_encoder)  # stage 2: only the U-Net (and the condition's projections) learn
+    return policy, batches, recipe
+
+
+def part_policy(args: argparse.Namespace, record) -> None:
+    import torch
+
+    from benchmarks.bench_chunk_ablation import evaluate_saved
+    from coursekit.checkpoint import CheckpointSaver, load_checkpoint, read_checkpoint_info
+    from coursekit.data.episodes import EpisodeDataset
+    from coursekit.stats import mean_estimate
+    from coursekit.train import TrainConfig, train
+
+    run = args.out / f"dp_{args.route}_p{args.pretrain_steps if args.route == 'two-stage' else 0}_s{args.policy_steps}_seed{args.seed}"
+    dataset = EpisodeDataset.load(args.data)
+    if not (run / "config.json").exists():
+        policy, batches, recipe = _pixel_policy(args, dataset)
+        torch.manual_seed(args.seed)
+        state = args.out / f".{run.name}.state.pt"  # resume state, removed once the checkpoint is written
+        config = TrainConfig(**{**recipe, "max_steps": args.policy_steps, "seed": args.seed, "num_threads": args.threads,
+                                "progress": False, "checkpoint_every_minutes": None})
+        train(policy, batches, config, callbacks=[CheckpointSaver(run, dataset_meta=dataset.meta)], state_file=state)
+        state.unlink(missing_ok=True)
+    policy, training = load_checkpoint(run, device="cpu"), read_checkpoint_info(run)["training"]
+    seeds = list(range(100_000, 100_000 + args.episodes))
+    saved = evaluate_saved(policy, run / f"eval_{seeds[0]}_{len(seeds)}.json", seeds, dataset.meta, {})
+    est = mean_estimate(saved["max_reward"])
+    label = f"DP from pixels, {args.route}"
+    print(f"{label}: {est.value:.3f} [{est.lo:.3f}, {est.hi:.3f}] (n={est.n}); trained {training['steps']} steps in "
+          f"{training['seconds'] / 60:.0f} min ({training['samples_per_s']:.0f} samples/s)")
+    cmd = (f"{COMMAND} --only policy --route {args.route} --policy-steps {args.policy_steps} --pretrain-steps "
+           f"{args.pretrain_steps} --threads {args.threads} --seed {args.seed}")
+    note = (f"To = 2 frames of 96x96 + pusher position, DDIM-10, Ta = 8; {training['steps']} steps of batch "
+            f"{training['train_config']['batch_size']} in {training['seconds'] / 60:.0f} min on {args.threads} thread(s)"
+            f"{' after stage 1 (' + str(args.pretrain_steps) + ' steps, encoder frozen)' if args.route == 'two-stage' else ''}; "
+            f"training seed {args.seed}; success {np.mean(saved['success']):.3f}")
+    record(SECTION, f"{label}: score", round(est.value, 3), "", cmd, interval=(round(est.lo, 3), round(est.hi, 3)),
+           n=est.n, seeds=f"{seeds[0]}-{seeds[-1]}", note=note)
+    record(SECTION, f"{label}: training throughput", round(training["samples_per_s"]), "samples/s", cmd, note=note)
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--only", nargs="+", choices=["pretrain"], default=["pretrain"], help="parts to run")
+    parser.add_argument("--only", nargs="+", choices=["pretrain", "policy"], default=["pretrain"],
+                        help="parts to run")
+    parser.add_argument("--route", choices=["two-stage", "end-to-end"], default="two-stage", help="policy: its encoder")
+    parser.add_argument("--policy-steps", type=int, default=19259, help="policy: optimiser steps (the keypoint DP's)")
+    parser.add_argument("--episodes", type=int, default=200, help="policy: protocol seeds to score (protocol: 200)")
     parser.add_argument("--data", type=Path, default=DATA, help=f"demonstrations (default {DATA})")
     parser.add_argument("--pretrain-steps", type=int, default=3000, help="stage-1 optimiser steps")
     parser.add_argument("--batch-size", type=int, default=128, help="frames per stage-1 step")
@@ -119,8 +184,10 @@ def main(argv: list[str] | None = None) -> None:
     if not args.data.is_file():
         raise SystemExit(f"--data {args.data} does not exist (make it with: coursekit collect pusht --episodes 400 "
                          f"--seed 0 --action-noise 0,5 --out {args.data})")
-    if min(args.pretrain_steps, args.batch_size, args.threads) < 1 or (args.episodes_limit or 2) < 2:
-        raise SystemExit("--pretrain-steps, --batch-size, --threads must be >= 1 and --episodes-limit >= 2")
+    if min(args.pretrain_steps, args.batch_size, args.threads, args.policy_steps, args.episodes) < 1 \
+            or (args.episodes_limit or 2) < 2:
+        raise SystemExit("--pretrain-steps, --batch-size, --threads, --policy-steps, --episodes must be >= 1 and "
+                         "--episodes-limit >= 2")
     import torch
 
     from benchmarks.results import record as write
@@ -129,6 +196,8 @@ def main(argv: list[str] | None = None) -> None:
     record = (lambda *a, **k: None) if args.no_record else write
     if "pretrain" in args.only:
         part_pretrain(args, record)
+    if "policy" in args.only:
+        part_policy(args, record)
 
 
 if __name__ == "__main__":

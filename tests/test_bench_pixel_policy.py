@@ -43,3 +43,27 @@ def test_pretrain_rows_are_measured_on_the_held_out_episode(demos, tmp_path, mon
     assert err_kw["n"] == int(np.sum(episode == 2)) and err_kw["interval"][0] <= err[2] <= err_kw["interval"][1]
     assert speed[3] == "images/s" and speed[2] > 0
     assert [p.name for p in tmp_path.iterdir()] == ["encoder_pretrained_s2_seed0.pt"]
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(600)
+def test_two_stage_policy_trains_on_the_frozen_stage1_encoder(demos, tmp_path, monkeypatch):
+    import torch
+
+    import benchmarks.results
+    from coursekit.checkpoint import load_checkpoint
+
+    rows = []
+    monkeypatch.setattr(benchmarks.results, "record", lambda *a, **k: rows.append((a, k)))
+    common = ["--pretrain-steps", "2", "--batch-size", "8", "--data", str(demos), "--out", str(tmp_path)]
+    with pytest.raises(SystemExit, match="no stage-1 encoder"):
+        bpp.main(["--only", "policy", "--policy-steps", "2", "--episodes", "1", *common])
+    bpp.main(["--only", "pretrain", "policy", "--policy-steps", "2", "--episodes", "1", "--episodes-limit", "3", *common])
+    score, speed = rows[2:]
+    assert score[0][1] == "DP from pixels, two-stage: score" and score[1]["n"] == 1
+    assert speed[0][3] == "samples/s"
+    stage1 = torch.load(tmp_path / "encoder_pretrained_s2_seed0.pt", weights_only=False)["encoder"]
+    policy = load_checkpoint(tmp_path / "dp_two-stage_p2_s2_seed0", device="cpu")
+    for k, v in stage1.items():  # frozen: the policy's encoder is stage 1's, bit for bit (EMA of a constant)
+        assert torch.equal(policy.vision_encoder.state_dict()[k].float(), v.float()), k
+    assert not list(tmp_path.glob(".*.state.pt")), "the resume state outlived its run"
