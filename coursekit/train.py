@@ -288,11 +288,11 @@ def _optimise(policy: Any, batch_iter: Iterator[dict[str, Any]], optimizer: torc
         now = time.perf_counter()
         if run.step % config.log_every == 0 or (config.max_steps is not None and run.step == config.max_steps):
             row = run.log(now, base_lrs[0] * factor)
-            if saver is not None:
-                saver.maybe_save(now)
             bar.set_postfix(loss=f"{row['loss']:.4f}", lr=f"{row['lr']:.1e}", sps=f"{row['samples_per_s']:.0f}")
             _notify(callbacks, "on_log", {"step": run.step, "loss": row["loss"], "lr": row["lr"],
                                           "samples_per_s": row["samples_per_s"], "wall_s": row["seconds"]})
+            if saver is not None:  # after the log row: a saved state's step is always in the metrics table
+                saver.maybe_save(now)
         bar.update(1 if config.max_steps is not None else int(now - run.start) - bar.n)
         if (callbacks and config.checkpoint_every_minutes is not None
                 and now - last_ckpt >= 60.0 * config.checkpoint_every_minutes):

@@ -29,7 +29,8 @@ from coursekit.atomic import atomic_path
 from coursekit.config import config_to_dict
 
 STATE_EVERY_S = 60.0
-"""Seconds between two writes of the resume state (checked at every log point)."""
+"""Most seconds between two writes of the resume state (checked at every log point); a run with
+periodic checkpoints more often than that (``checkpoint_every_minutes``) writes it as often."""
 FORMAT = "coursekit-train-state-1"
 
 
@@ -47,6 +48,8 @@ class TrainState:
         self.path = Path(path)
         self.config, self.policy, self.optimizer, self.ema, self.batches, self.run = config, policy, optimizer, ema, batches, run
         self.last_save = time.perf_counter()
+        minutes = getattr(config, "checkpoint_every_minutes", None)
+        self.every_s = STATE_EVERY_S if minutes is None else min(STATE_EVERY_S, 60.0 * minutes)
 
     def _payload(self, now: float) -> dict[str, Any]:
         run = self.run
@@ -65,20 +68,20 @@ class TrainState:
         self.last_save = now
 
     def maybe_save(self, now: float) -> None:
-        """Save when ``STATE_EVERY_S`` seconds have passed since the last save (or the last step is done)."""
-        if now - self.last_save >= STATE_EVERY_S or self.run.step >= self.config.max_steps:
+        """Save when ``every_s`` seconds have passed since the last save (or the last step is done)."""
+        if now - self.last_save >= self.every_s or self.run.step >= self.config.max_steps:
             self.save(now)
+
+    @staticmethod
+    def saved_step(path: str | os.PathLike) -> int:
+        """The step a resume state file was written at (ValueError naming the file if it is not one)."""
+        return int(_read(Path(path))["step"])
 
     def resume(self) -> bool:
         """Restore the saved state if the file exists (True), after checking it belongs to this run."""
         if not self.path.is_file():
             return False
-        try:
-            state = torch.load(self.path, map_location="cpu", weights_only=False)
-        except Exception as exc:  # a truncated or foreign file: say which, never train on garbage
-            raise ValueError(f"cannot read the resume state {str(self.path)!r}: {exc}") from exc
-        if not isinstance(state, dict) or state.get("format") != FORMAT:
-            raise ValueError(f"{str(self.path)!r} is not a coursekit training state (format {FORMAT!r})")
+        state = _read(self.path)
         mine = config_to_dict(self.config)
         differ = sorted(k for k in set(mine) | set(state["train_config"])
                         if k not in ("progress", "checkpoint_every_minutes") and mine.get(k) != state["train_config"].get(k))
@@ -103,3 +106,14 @@ class TrainState:
         run.step, run.samples, run.history = int(state["step"]), int(saved["samples"]), list(saved["history"])
         run.last_loss = float(saved["last_loss"])
         run.start = run.last_log_t = time.perf_counter() - float(saved["elapsed_s"])
+
+
+def _read(path: Path) -> dict[str, Any]:
+    """Load a resume state file, refusing a truncated or foreign one by name (never train on garbage)."""
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=False)
+    except Exception as exc:
+        raise ValueError(f"cannot read the resume state {str(path)!r}: {exc}") from exc
+    if not isinstance(state, dict) or state.get("format") != FORMAT:
+        raise ValueError(f"{str(path)!r} is not a coursekit training state (format {FORMAT!r})")
+    return state

@@ -25,7 +25,7 @@ import time
 from collections.abc import Mapping
 from pathlib import Path
 from types import TracebackType
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TextIO
 
 import numpy as np
 
@@ -163,11 +163,16 @@ class MetricsLog:
             run (the first record draws at once; :meth:`close` always draws the final one).
         lock: the command's lock on the run folder (``coursekit.outputs.claim_output``), so the
             plot's temporaries are recorded there; None locks each re-draw on its own.
+        resume_at: continue the log of an interrupted run whose training resumes at this step
+            (``coursekit.train_state``): ``metrics.csv`` must exist with the trainer's header; its
+            rows past ``resume_at`` (logged after the state was saved, about to be logged again)
+            are dropped, so every step appears once.
 
-    Raises FileExistsError naming the file when ``metrics.csv`` or ``loss.png`` exists.
+    Raises FileExistsError naming the file when ``metrics.csv`` or ``loss.png`` exists (unless resuming).
     """
 
-    def __init__(self, run_dir: str | Path, *, plot_every_s: float = 30.0, lock: OutputLock | None = None) -> None:
+    def __init__(self, run_dir: str | Path, *, plot_every_s: float = 30.0, lock: OutputLock | None = None,
+                 resume_at: int | None = None) -> None:
         if not (isinstance(plot_every_s, (int, float)) and plot_every_s >= 0 and math.isfinite(plot_every_s)):
             raise ValueError(f"plot_every_s must be a finite number of seconds >= 0, got {plot_every_s!r}")
         self.run_dir = Path(run_dir)
@@ -179,6 +184,11 @@ class MetricsLog:
         self.lock = lock
         self.rows = 0
         """Rows written so far."""
+        self._last_plot = -math.inf  # monotonic time of the last draw
+        if resume_at is not None:
+            self._fh = self._reopen(int(resume_at))
+            self._writer = csv.writer(self._fh)
+            return
         if self.png_path.exists():
             raise FileExistsError(f"{self.png_path} already exists and was not written by this run's log; "
                                   "choose a new run folder (or let the command's --overwrite clear it)")
@@ -191,7 +201,21 @@ class MetricsLog:
         self._writer = csv.writer(self._fh)
         self._writer.writerow(COLUMNS)
         self._fh.flush()
-        self._last_plot = -math.inf  # monotonic time of the last draw
+
+    def _reopen(self, step: int) -> TextIO:
+        """The interrupted run's metrics.csv cut back to rows at steps <= ``step``, open for appending."""
+        from coursekit.atomic import atomic_write_text
+
+        try:
+            lines = self.csv_path.read_text(encoding="utf-8").splitlines()
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ValueError(f"cannot resume the log {self.csv_path}: {exc}") from exc
+        if not lines or lines[0].strip() != ",".join(COLUMNS):
+            raise ValueError(f"cannot resume the log {self.csv_path}: it lacks the trainer's header {','.join(COLUMNS)}")
+        kept = [line for line in lines[1:] if line.split(",", 1)[0].isdigit() and int(line.split(",", 1)[0]) <= step]
+        atomic_write_text(self.csv_path, "\n".join([lines[0], *kept]) + "\n", lock=self.lock)
+        self.rows = len(kept)
+        return self.csv_path.open("a", newline="")
 
     @property
     def closed(self) -> bool:

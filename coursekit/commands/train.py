@@ -2,7 +2,10 @@
 
 The run folder (--out) holds the checkpoint (model.safetensors + config.json, rewritten every
 --checkpoint-every minutes and at the end), metrics.csv (step, loss, lr, samples/s, wall time)
-and loss.png, both written during training.
+and loss.png, both written during training. With --resume (a step budget) it also holds
+train_state.pt while training: everything the remaining steps depend on, rewritten at least every
+minute; if the run is stopped, the same command continues it with the same bytes as a run that was
+never stopped, and the file is removed when the run is complete.
 
 Examples::
 
@@ -10,6 +13,7 @@ Examples::
     coursekit train --policy diffusion --data demos.npz --minutes 20 --out runs/dp        # CPU, state
     coursekit train --recipe cpu --data demos.npz --minutes 20 --out runs/dp_cpu          # lr 5e-4, batch 128
     coursekit train --policy regression --data demos.npz --minutes 20 --out runs/reg     # the baseline
+    coursekit train --recipe cpu --data demos.npz --steps 20000 --resume --out runs/long  # stop it; run it again
     coursekit collect aloha-cube --out cube.npz
     coursekit train --policy act --recipe cpu --data cube.npz --minutes 30 --out runs/act_cube  # ACT
     coursekit train --policy diffusion --recipe cpu --data cube.npz --minutes 30 --out runs/dp_cube  # DP, arm pair
@@ -33,6 +37,8 @@ from coursekit.commands._args import device, float_in, int_in, int_list_in, outp
 from coursekit.data.features import FEATURES  # numpy only: `coursekit --help` stays instant
 from coursekit.policies import POLICY_TYPES  # the registry itself (no torch until a class is used)
 
+STATE_NAME = "train_state.pt"
+"""The resume state inside a run folder trained with --resume (removed when the run is complete)."""
 HELP = "train a chunk policy (diffusion, regression baseline or act) on PushT or arm-pair demonstrations"
 
 # Bounds of the numeric flags: beyond them a value cannot be meant (a budget of 1e-300 minutes trains
@@ -91,6 +97,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "training.init_from in the new checkpoint")
     parser.add_argument("--checkpoint-every", type=float_in(0.0, MAX_MINUTES, lo_open=True), default=5.0,
                         help="minutes between periodic checkpoints (default 5)")
+    parser.add_argument("--resume", action="store_true",
+                        help=f"keep a resume state ({STATE_NAME}) in --out while training and, when --out holds one "
+                             f"from a stopped run, continue that run exactly (needs --steps, not --minutes)")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
@@ -122,6 +131,7 @@ def run(args: argparse.Namespace) -> int:
     if args.minutes is None and args.steps is None:
         raise ValueError("give a budget: --minutes M and/or --steps N")
     _check_budget(args)
+    _check_resume(args)
     with claim_run_out(args) as lock:  # before any work: nothing is loaded, built or written yet
         for leftover in lock.swept:
             print(f"removed {str(leftover)!r}, left by an interrupted earlier run", file=sys.stderr)
@@ -138,6 +148,7 @@ def _train(args: argparse.Namespace, lock: Any) -> int:
     from coursekit.policies import get_policy_class
     from coursekit.policies.factory import make_policy
     from coursekit.train import TrainConfig, train
+    from coursekit.train_state import TrainState
     from coursekit.training_log import MetricsLog
 
     fields = _config_fields(args)
@@ -165,14 +176,20 @@ def _train(args: argparse.Namespace, lock: Any) -> int:
     prior = warm_start(policy, args.init_from) if args.init_from is not None else None
     if prior is not None:
         print(f"warm start from {args.init_from} ({prior['steps']} steps, {prior['seconds']} s)")
+    resume_at = TrainState.saved_step(args.out / STATE_NAME) if _resuming(args) else None
+    if resume_at is not None:
+        print(f"resuming {args.out} at step {resume_at} of {args.steps}")
     with contextlib.ExitStack() as stack:
         run_dir = args.out
-        if args.out.exists() and any(args.out.iterdir()):  # --overwrite: keep the old run until the new is complete
-            run_dir = stack.enter_context(staging_dir(args.out, lock))
+        if args.out.exists() and any(args.out.iterdir()) and resume_at is None:  # --overwrite: keep the old run
+            run_dir = stack.enter_context(staging_dir(args.out, lock))  # until the new one is complete
             print(f"training in {run_dir}; it replaces {args.out} when complete")
         saver = CheckpointSaver(run_dir, dataset_meta=meta, lock=lock)
-        with MetricsLog(run_dir, lock=lock) as metrics:  # metrics.csv + loss.png beside the checkpoint, during training
-            result = train(policy, batches, config, callbacks=[saver, metrics], init_from=prior)
+        state = run_dir / STATE_NAME if args.resume else None
+        with MetricsLog(run_dir, lock=lock, resume_at=resume_at) as metrics:  # metrics.csv + loss.png, during training
+            result = train(policy, batches, config, callbacks=[saver, metrics], init_from=prior, state_file=state)
+        if state is not None:
+            state.unlink(missing_ok=True)  # complete: nothing left to resume
         if run_dir != args.out:
             replace_dir(run_dir, args.out, lock)  # one atomic exchange; the old run is then removed with the staging folder
     s = result.summary
@@ -194,7 +211,7 @@ def run_dir_foreign(path: Path) -> str | None:
 
     names = sorted(p.name for p in path.iterdir())
     for name in names:
-        if name not in (CONFIG_FILE, WEIGHTS_FILE, METRICS_NAME, LOSS_PLOT_NAME):
+        if name not in (CONFIG_FILE, WEIGHTS_FILE, METRICS_NAME, LOSS_PLOT_NAME, STATE_NAME):
             return f"it holds {name!r}, which a run never writes"
         if not regular_file(path / name):
             return f"its {name!r} is not a regular file"
@@ -216,7 +233,26 @@ def claim_run_out(args: argparse.Namespace) -> contextlib.AbstractContextManager
     from coursekit.outputs import claim_output
 
     return claim_output(args.out, what="coursekit run folder", foreign=run_dir_foreign, directory=True,
-                        overwrite=args.overwrite, inputs=[args.data, args.init_from])
+                        overwrite=args.overwrite or _resuming(args), inputs=[args.data, args.init_from])
+
+
+def _resuming(args: argparse.Namespace) -> bool:
+    """--resume and --out holds the resume state of a stopped run."""
+    return bool(getattr(args, "resume", False)) and (args.out / STATE_NAME).is_file()
+
+
+def _check_resume(args: argparse.Namespace) -> None:
+    """Refuse --resume where no exact continuation is defined, before any work."""
+    if not getattr(args, "resume", False):
+        return
+    if args.minutes is not None or args.steps is None:
+        raise ValueError(f"--resume needs a step budget (--steps N) and no --minutes (got --minutes {args.minutes}): "
+                         f"with a time budget the steps trained depend on the machine's speed")
+    if args.overwrite:
+        raise ValueError("--resume continues the run at --out; --overwrite replaces it: give one of them")
+    if args.out.is_dir() and any(args.out.iterdir()) and not (args.out / STATE_NAME).is_file():
+        raise ValueError(f"--resume: {str(args.out)!r} holds no resume state ({STATE_NAME}): it is a finished run "
+                         f"or not a run; give a new --out, or --overwrite to train it again")
 
 
 def _check_flags_apply(args: argparse.Namespace, config_fields: set[str], fields: dict[str, Any]) -> None:
