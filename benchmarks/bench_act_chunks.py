@@ -48,6 +48,8 @@ VARIANTS = {  # name -> ACT config fields
 EXECUTORS = ("open-loop chunks (Ta=k)", "temporal ensembling m=0.01")
 BLOCK = 50
 """Seeds per cached evaluation block (the unit an interrupted evaluation resumes from)."""
+EPISODE_STEPS: int | None = None
+"""Control steps per evaluation episode: None is the protocol's (8 s); tests shorten it."""
 CACHE = Path(os.environ.get("XDG_CACHE_HOME", "~/.cache")).expanduser() / "coursekit" / "act_chunks"
 
 
@@ -107,7 +109,7 @@ def evaluate_run(policy, run: Path, executor: str, seeds: list[int], dataset_met
         path = run / f"eval_{tag}_{block[0]}_{len(block)}.json"
         if not path.exists():
             r = evaluate_aloha(policy, TASK, seeds=block, executor_factory=executor_factory(executor, policy.config.chunk_size),
-                               dataset_meta=dataset_meta, progress=False)
+                               dataset_meta=dataset_meta, progress=False, max_steps=EPISODE_STEPS)
             part = {"seed": block, "strict": (r.states[:, -1, 1] > 0.5).tolist(),
                     "stage": r.states[:, :, 0].max(axis=1).astype(int).tolist(), "seconds": r.seconds}
             tmp = path.with_suffix(".tmp")

@@ -20,6 +20,7 @@ def test_a_tiny_sweep_records_wilson_rows_and_reuses_its_cache(tmp_path, monkeyp
 
     rows = []
     monkeypatch.setattr(bac, "N_DEMOS", 2)
+    monkeypatch.setattr(bac, "EPISODE_STEPS", 40)  # the loop and its cache, not the task: 40 of 400 steps
     monkeypatch.setattr(benchmarks.results, "record", lambda *a, **k: rows.append((a, k)))
     argv = ["--steps", "2", "--train-seeds", "0", "--episodes", "1", "--variants", "ACT k=10", "--out", str(tmp_path)]
     bac.main(argv)
