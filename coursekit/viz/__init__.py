@@ -11,7 +11,8 @@ name below pulls its module (and that module's heavy imports) on first use.
     TeleopWidget                        push the T with the mouse, recorded            (teleop_widget)
     FigureScrubber, delay_scrubber      sliders that redraw one figure in place        (scrubbers.*)
 
-Figures: ``pusht_plots`` (the PushT scene, trajectories), ``expert_plots`` (the scripted expert).
+Figures: ``pusht_plots`` (the PushT scene, trajectories), ``expert_plots`` (the scripted expert),
+``measured`` (the results table's rows, with their intervals, for the chapters' measured claims).
 A training run's metrics.csv and loss.png are the trainer's (:mod:`coursekit.training_log`).
 """
 

@@ -1,0 +1,81 @@
+"""The course's own measurements as figures: rows of the repository's results table, with intervals.
+
+The chapters argue from ``benchmarks/results.json`` (every row written by a command in
+``benchmarks/``, with n, seeds and a 95 % interval), never from numbers typed into a cell. These
+functions read the rows a figure needs and draw them with their intervals; a point measured on
+fewer than 200 episodes says its n in the legend. A pip-installed coursekit has no table: the
+readers return nothing and the figures say where the rows come from.
+
+    load_rows(section)        {key: row} of one section (all sections when None)
+    budget_curve(rows)        variant -> [(steps, value, lo, hi, n)]   (bench_chunk_ablation)
+    chunk_sweep(rows)         executor -> [(k, value, lo, hi, n)], and the no-CVAE rows (bench_act_chunks)
+    plot_points(ax, pts, ...) one series with its interval bars
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+from typing import Any
+
+RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "results.json"
+"""The results table of a repository checkout (absent from an installed package)."""
+Point = tuple  # (x, value, lo, hi, n)
+
+_BUDGET = re.compile(r"^(?P<variant>.+?) \(To=.*\) score, (?P<seeds>\d+) training seed\(s\), (?P<steps>\d+) steps$")
+_CHUNK = re.compile(r"^ACT k=(?P<k>\d+)(?P<novae> without CVAE)?, (?P<executor>.+): strict success$")
+
+
+def load_rows(section: str | None = None, path: str | Path = RESULTS) -> dict[str, dict[str, Any]]:
+    """The rows of ``section`` (all when None) keyed "Section/name"; {} when the table is not here."""
+    path = Path(path)
+    if not path.is_file():
+        return {}
+    table = json.loads(path.read_text(encoding="utf-8"))
+    return {k: r for k, r in table.items() if section is None or r["section"] == section}
+
+
+def _point(x: float, row: dict[str, Any], scale: float = 1.0) -> Point:
+    lo, hi = row.get("interval") or (row["value"], row["value"])
+    return (x, row["value"] * scale, lo * scale, hi * scale, row.get("n") or 0)
+
+
+def budget_curve(rows: dict[str, dict[str, Any]]) -> dict[str, list[Point]]:
+    """variant -> [(optimiser steps, mean score over training seeds, t-interval lo, hi, episodes)], by steps.
+
+    Reads the "Chunk ablation (PushT)" rows "<variant> (To=..) score, <k> training seed(s), <N> steps"
+    (``bench_chunk_ablation --name-budget``), all starts only.
+    """
+    curves: dict[str, list[Point]] = {}
+    for row in rows.values():
+        m = _BUDGET.match(row["name"]) if row["section"] == "Chunk ablation (PushT)" else None
+        if m:
+            curves.setdefault(m["variant"], []).append(_point(int(m["steps"]), row))
+    return {v: sorted(p) for v, p in sorted(curves.items())}
+
+
+def chunk_sweep(rows: dict[str, dict[str, Any]]) -> tuple[dict[str, list[Point]], dict[str, Point]]:
+    """ACT's k sweep on the transfer cube as fractions: ({executor: [(k, ...)]}, {executor: no-CVAE point at k})."""
+    sweep: dict[str, list[Point]] = {}
+    no_vae: dict[str, Point] = {}
+    for row in rows.values():
+        m = _CHUNK.match(row["name"]) if row["section"] == "Chunk ablation (arm pair)" else None
+        if m:
+            point = _point(int(m["k"]), row, 0.01)  # stored in %
+            if m["novae"]:
+                no_vae[m["executor"]] = point
+            else:
+                sweep.setdefault(m["executor"], []).append(point)
+    return {e: sorted(p) for e, p in sorted(sweep.items())}, no_vae
+
+
+def plot_points(ax: Any, points: list[Point], label: str, **style: Any) -> None:
+    """Draw ``points`` (x, value, lo, hi, n) with 95 % interval bars; a thin n (< 200) joins the label."""
+    if not points:
+        return
+    xs, vs, los, his, ns = zip(*points)
+    thin = [n for n in ns if n < 200]
+    label = label + (f" (n = {min(thin)}-{max(thin)} on some points)" if thin else "")
+    ax.errorbar(xs, vs, yerr=[[v - lo for v, lo in zip(vs, los)], [hi - v for v, hi in zip(vs, his)]],
+                capsize=3, label=label, **{"fmt": "o-", "ms": 4, **style})

@@ -1,0 +1,63 @@
+"""coursekit.viz.measured reads the results table's rows into figure series, intervals included."""
+
+from __future__ import annotations
+
+import json
+
+import matplotlib
+import pytest
+
+matplotlib.use("Agg")
+
+from coursekit.viz.measured import budget_curve, chunk_sweep, load_rows, plot_points  # noqa: E402
+
+
+def row(section, name, value, interval=None, n=None, unit=""):
+    return {"section": section, "name": name, "value": value, "interval": interval, "n": n, "unit": unit}
+
+
+ROWS = {
+    "a": row("Chunk ablation (PushT)", "Diffusion Policy DDIM-10 (To=2, Tp=16, Ta=8) score, 3 training seed(s), 6000 steps",
+             0.79, [0.78, 0.80], 600),
+    "b": row("Chunk ablation (PushT)", "Diffusion Policy DDIM-10 (To=2, Tp=16, Ta=8) score, 3 training seed(s), 2000 steps",
+             0.35, [0.32, 0.38], 600),
+    "c": row("Chunk ablation (PushT)", "Diffusion Policy DDIM-10 (To=2, Tp=16, Ta=8) score, 3 training seed(s), "
+             "2000 steps, two-way starts", 0.29, [0.21, 0.37], 234),
+    "d": row("Chunk ablation (PushT)", "chunked regression (To=2, Tp=16, Ta=8) score, 3 training seed(s)", 0.78,
+             [0.72, 0.84], 600),  # no budget in the name: not a point of the curve
+    "e": row("Chunk ablation (arm pair)", "ACT k=10, open-loop chunks (Ta=k): strict success", 80.0, [76.6, 83.0], 600, "%"),
+    "f": row("Chunk ablation (arm pair)", "ACT k=1, open-loop chunks (Ta=k): strict success", 10.0, [7.9, 12.6], 600, "%"),
+    "g": row("Chunk ablation (arm pair)", "ACT k=100 without CVAE, open-loop chunks (Ta=k): strict success", 85.0,
+             [82.0, 87.6], 600, "%"),
+}
+
+
+def test_budget_curve_takes_the_all_starts_rows_with_a_budget_sorted_by_steps():
+    assert budget_curve(ROWS) == {"Diffusion Policy DDIM-10": [(2000, 0.35, 0.32, 0.38, 600), (6000, 0.79, 0.78, 0.80, 600)]}
+
+
+def test_chunk_sweep_in_fractions_with_the_no_cvae_point_apart():
+    sweep, no_vae = chunk_sweep(ROWS)
+    assert list(sweep) == ["open-loop chunks (Ta=k)"] and list(no_vae) == ["open-loop chunks (Ta=k)"]
+    assert sweep["open-loop chunks (Ta=k)"] == [pytest.approx((1, 0.10, 0.079, 0.126, 600)),
+                                                pytest.approx((10, 0.80, 0.766, 0.83, 600))]
+    assert no_vae["open-loop chunks (Ta=k)"] == pytest.approx((100, 0.85, 0.82, 0.876, 600))
+
+
+def test_load_rows_filters_a_section_and_is_empty_without_a_table(tmp_path):
+    path = tmp_path / "results.json"
+    path.write_text(json.dumps(ROWS))
+    assert set(load_rows("Chunk ablation (arm pair)", path)) == {"e", "f", "g"}
+    assert load_rows(None, tmp_path / "absent.json") == {}
+
+
+def test_plot_points_draws_the_interval_and_names_a_thin_n():
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots()
+    plot_points(ax, [(1, 0.5, 0.4, 0.7, 50), (2, 0.6, 0.55, 0.65, 200)], "x")
+    (container,) = ax.containers
+    lo, hi = container.lines[1][0].get_ydata(), container.lines[1][1].get_ydata()  # the cap markers
+    assert list(lo) == [0.4, 0.55] and list(hi) == [0.7, 0.65]
+    assert ax.get_legend_handles_labels()[1] == ["x (n = 50-50 on some points)"]
+    plt.close(fig)
