@@ -49,8 +49,7 @@ HELD_OUT = 40
 def encoder_config():
     from coursekit.nn.vision import VisionEncoderConfig
 
-    return VisionEncoderConfig(widths=(16, 32, 64, 128), blocks_per_stage=1, image_size=48, crop_size=42,
-                               frame_size=96, num_keypoints=32, feature_dim=64)
+    return VisionEncoderConfig.preset("small")
 
 
 def frames_and_keypoints(data: Path, limit: int | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

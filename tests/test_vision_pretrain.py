@@ -69,3 +69,9 @@ def test_nan_targets_are_refused():
     centres[1, 0] = np.nan
     with pytest.raises(ValueError, match="targets must be finite"):
         pretrain_encoder(VisionEncoder(SMALL), frames, centres)
+
+
+def test_the_small_preset_takes_96x96_frames_and_works_at_48x48():
+    cfg = VisionEncoderConfig.preset("small")
+    assert (cfg.input_size, cfg.image_size, cfg.crop_size) == ((96, 96), (48, 48), (42, 42))
+    assert VisionEncoder(cfg).eval()(torch.zeros(2, 3, 96, 96)).shape == (2, cfg.feature_dim)
