@@ -5,7 +5,8 @@ Run everything (several hours on 2 cores: four 30-minute trainings plus evaluati
     .venv/bin/python -m benchmarks.bench_act
     .venv/bin/python -m benchmarks.bench_act --only latency             # ~1 minute
     .venv/bin/python -m benchmarks.bench_act --only cube --minutes 30   # train + evaluate ACT on transfer cube
-    .venv/bin/python -m benchmarks.bench_act --only cube --checkpoint outputs/checkpoints/act_transfer_cube
+    .venv/bin/python -m benchmarks.bench_act --only cube --checkpoint coursekit/checkpoints/act_transfer_cube --threads 1
+    .venv/bin/python -m benchmarks.bench_act --only act_pusht --checkpoint coursekit/checkpoints/act_pusht --threads 1
     .venv/bin/python -m benchmarks.bench_act --quick --no-record        # smoke run of every section
 
 Sections (``--only`` takes several):
@@ -15,13 +16,17 @@ Sections (``--only`` takes several):
   plus the paper-size ACT; per-action cost with each one's executor (ACT + temporal ensembling
   queries every step; DP executes Ta = 8 per chunk). Random weights: latency does not depend on them.
 - ``cube`` / ``insertion``: 50 scripted demonstrations (seeds 0..49), ACT trained for ``--minutes``
-  on ``--threads`` threads, then 50 held-out episodes (seeds 100000+) with temporal ensembling
+  on ``--threads`` threads (or ``--checkpoint``), then the held-out episodes with temporal ensembling
   on (m = 0.01) and off (open-loop chunks of k); per-stage rates and strict (final-state) success.
+  Only a given ``--checkpoint`` is recorded: a minutes budget on a shared machine is not a
+  reproducible condition (the step-budget, 3-training-seed sweep is ``bench_act_chunks``).
 - ``dp_cube``: Diffusion Policy (state features, DDIM-10, receding horizon Ta = 8) on transfer cube.
-- ``act_pusht``: ACT (k = 20, temporal ensembling) on PushT state features, evaluated by the
-  PushT protocol (mean-of-max coverage score, success rate; 50 held-out seeds).
+- ``act_pusht``: ACT (k = 20, temporal ensembling) on PushT state features (trained, or
+  ``--checkpoint``), evaluated by the PushT protocol (mean-of-max coverage score, success rate).
 
-Every figure goes through ``benchmarks.results.record(section="ACT", ...)``.
+Evaluation follows the protocol: ``--episodes`` (default 200) held-out seeds from 100000, every
+rate with its Wilson 95 % interval and every mean score with a bootstrap one (:mod:`coursekit.stats`),
+recorded with ``n`` and ``seeds``. Every figure goes through ``benchmarks.results.record(section="ACT", ...)``.
 """
 
 from __future__ import annotations
@@ -38,11 +43,30 @@ import torch
 
 from benchmarks.results import record
 from coursekit.checkpoint import SHIPPED_DIR
+from coursekit.evaluate.result import EVAL_SEED_START
+from coursekit.stats import Estimate, mean_estimate, rate_estimate
 
 COMMAND = ".venv/bin/python -m benchmarks.bench_act"
 SECTION = "ACT"
 SECTIONS = ("latency", "cube", "insertion", "dp_cube", "act_pusht")
 TASK_LABEL = {"transfer_cube": "transfer cube", "insertion": "insertion"}
+
+
+def _seeds_text(n: int) -> str:
+    """The protocol seed range of an n-episode evaluation, as results rows give it."""
+    return f"{EVAL_SEED_START}-{EVAL_SEED_START + n - 1}"
+
+
+def _strict(r: Any) -> Estimate:
+    """Strict (final-state) success of an arm-pair evaluation with its Wilson interval: the recorded
+    states' column 1 on the last step (``coursekit.tasks.aloha.arm_pair_scores``)."""
+    return rate_estimate(np.asarray(r.states[:, -1, 1] > 0.5, dtype=bool))
+
+
+def _record_pct(name: str, est: Estimate, cmd: str, target: str, note: str) -> None:
+    """Record a success rate in percent, with its Wilson interval, n and protocol seeds."""
+    record(SECTION, name, round(100 * est.value, 1), "%", cmd, target=target, note=note,
+           interval=(round(100 * est.lo, 1), round(100 * est.hi, 1)), n=est.n, seeds=_seeds_text(est.n))
 
 
 def _median_ms(fn, repeats: int) -> list[float]:
@@ -145,8 +169,19 @@ def _load_or_train_act(task: str, args: argparse.Namespace) -> tuple[Any, dict[s
     return load_checkpoint(out, device="cpu"), summary
 
 
+def _trained_text(summary: dict[str, Any]) -> str:
+    """'<steps> steps / <min> min on <t> thread(s)[, warm-started from ...]' of a checkpoint's training summary."""
+    trained = (f"{summary.get('steps')} steps / {(summary.get('seconds') or 0) / 60:.1f} min on "
+               f"{summary.get('torch_threads')} thread(s)")
+    prior = summary.get("init_from")
+    if prior:
+        trained += f", warm-started from {prior.get('steps')} steps / {(prior.get('seconds') or 0) / 60:.1f} min"
+    return trained
+
+
 def bench_aloha_act(task: str, args: argparse.Namespace) -> None:
-    """Train (or load) ACT on an ALOHA task; evaluate with temporal ensembling on and off."""
+    """Train (or load) ACT on an ALOHA task; evaluate with temporal ensembling on and off. Only a
+    given --checkpoint is recorded: a minutes budget shared with other jobs does not reproduce."""
     from coursekit.evaluate import evaluate_aloha
     from coursekit.execution.ensembling import TemporalEnsemble
     from coursekit.execution.receding import RecedingHorizon
@@ -158,35 +193,26 @@ def bench_aloha_act(task: str, args: argparse.Namespace) -> None:
                  f"open-loop chunks (Ta=k={k})": lambda pc: RecedingHorizon(pc, 1, k)}
     label = TASK_LABEL[task]
     shipped = args.checkpoint is not None and Path(args.checkpoint).resolve().parent == SHIPPED_DIR
-    if args.checkpoint is None:
-        source, targets = f"after {args.minutes:g} min training", {"transfer_cube": ">= 80 %"}
-    elif shipped:
-        source, targets = "shipped checkpoint", {"transfer_cube": ">= 90 %", "insertion": ">= 40 %"}
-    else:
-        source, targets = f"checkpoint {args.checkpoint}", {}
+    source, targets = (("shipped checkpoint", {"transfer_cube": ">= 90 %", "insertion": ">= 40 %"}) if shipped
+                       else (f"checkpoint {args.checkpoint}", {}))
     for name, factory in executors.items():
         torch.set_num_threads(args.threads)
         r = evaluate_aloha(policy, task, n_episodes=n, executor_factory=factory, progress=not args.no_progress,
                            max_steps=60 if args.quick else 400)
-        rates = r.info["stage_rates"]
-        print(f"ACT {label} ({source}), {name}: strict {r.info['strict_success_rate']:.2f}, stages "
+        rates, strict = r.info["stage_rates"], _strict(r)
+        print(f"ACT {label} ({source if args.checkpoint else 'just trained'}), {name}: strict {strict}, stages "
               f"{[round(rates[s], 2) for s in range(1, 5)]}, {r.ms_per_chunk:.1f} ms/chunk (batch {n})")
-        if args.no_record:
+        if args.no_record or args.checkpoint is None:
             continue
-        prior = summary.get("init_from")
-        trained = (f"{summary.get('steps')} steps / {summary.get('seconds', 0) / 60:.1f} min on "
-                   f"{summary.get('torch_threads')} thread(s)")
-        if prior:
-            trained += f", warm-started from {prior.get('steps')} steps / {(prior.get('seconds') or 0) / 60:.1f} min"
-        note = (f"{n} held-out episodes (seeds 100000+); stages 1-4 reached (stage 4 = published success): "
-                f"{', '.join(f'{rates[s]:.2f}' for s in range(1, 5))}; trained {trained}")
-        if args.checkpoint is None and args.threads == 1 and args.note_concurrent:
-            note += f"; {args.note_concurrent}"
+        note = (f"{n} held-out episodes (seeds {_seeds_text(n)}), Wilson 95 % interval; stages 1-4 reached "
+                f"(stage 4 = published success): {', '.join(f'{rates[s]:.2f}' for s in range(1, 5))}; "
+                f"trained {_trained_text(summary)}; evaluated with {args.threads} torch thread(s)")
         target = targets.get(task, "") if name.startswith("temporal") else ""
-        cmd = f"{COMMAND} --only {'cube' if task == 'transfer_cube' else 'insertion'}"
-        cmd += f" --checkpoint {args.checkpoint}" if args.checkpoint else f" --minutes {args.minutes:g} --threads {args.threads}"
-        record(SECTION, f"ACT {label} strict success, {source}, {name}", round(100 * r.info["strict_success_rate"], 1),
-               "%", cmd, target=target, note=note)
+        cmd = (f"{COMMAND} --only {'cube' if task == 'transfer_cube' else 'insertion'} --checkpoint {args.checkpoint} "
+               f"--episodes {n} --threads {args.threads}")
+        _record_pct(f"ACT {label} strict success, {source}, {name}", strict, cmd, target, note)
+    if args.checkpoint is None and not args.no_record:
+        print("not recorded: only a --checkpoint's evaluation is a results row (bench_act_chunks: step budgets)")
 
 
 def _maybe_ship(out: Path, name: str, args: argparse.Namespace) -> tuple[Path, str]:
@@ -220,23 +246,21 @@ def bench_dp_cube(args: argparse.Namespace) -> None:
     n = 3 if args.quick else args.episodes
     r = evaluate_aloha(policy, "transfer_cube", n_episodes=n, progress=not args.no_progress,
                        max_steps=60 if args.quick else 400)
-    rates = r.info["stage_rates"]
-    print(f"DP transfer cube: strict {r.info['strict_success_rate']:.2f}, stages {[rates[s] for s in range(1, 5)]}")
+    rates, strict = r.info["stage_rates"], _strict(r)
+    print(f"DP transfer cube: strict {strict}, stages {[rates[s] for s in range(1, 5)]}")
     if not args.no_record:
-        record(SECTION, "DP transfer cube success (strict, DDIM-10, Ta=8)", round(100 * r.info["strict_success_rate"], 1),
-               "%", f"{COMMAND} --only dp_cube " + (f"--checkpoint {args.checkpoint}" if args.checkpoint else
-                                                    f"--minutes {args.minutes:g} --threads {args.threads}" + (" --ship" if args.ship else "")),
-               note=f"{n} held-out episodes; stages 1-4: "
-               f"{', '.join(f'{rates[s]:.2f}' for s in range(1, 5))}; trained {summary['steps']} steps / "
-               f"{summary['seconds'] / 60:.1f} min on {summary.get('torch_threads')} thread(s) (cpu recipe), "
-               f"state features [qpos, cube pose]" + (f"; {args.note_concurrent}" if args.note_concurrent else "") + shipped)
+        cmd = f"{COMMAND} --only dp_cube " + (f"--checkpoint {args.checkpoint}" if args.checkpoint else
+                                             f"--minutes {args.minutes:g}" + (" --ship" if args.ship else ""))
+        _record_pct("DP transfer cube success (strict, DDIM-10, Ta=8)", strict, f"{cmd} --episodes {n} --threads {args.threads}",
+                    "", f"{n} held-out episodes (seeds {_seeds_text(n)}), Wilson 95 % interval; stages 1-4: "
+                        f"{', '.join(f'{rates[s]:.2f}' for s in range(1, 5))}; trained {_trained_text(summary)} (cpu recipe), "
+                        f"state features [qpos, cube pose]" + (f"; {args.note_concurrent}" if args.note_concurrent else "")
+                        + shipped)
 
 
-def bench_act_pusht(args: argparse.Namespace) -> None:
-    """ACT on PushT state features (k = 20, temporal ensembling), PushT protocol."""
-    from coursekit.checkpoint import load_checkpoint
+def _train_act_pusht(args: argparse.Namespace) -> tuple[Path, dict[str, Any], str]:
+    """Train ACT (k = 20) on 200 PushT expert demonstrations for --minutes; (checkpoint, summary, shipped note)."""
     from coursekit.data import EpisodeDataset
-    from coursekit.evaluate import evaluate_pusht
     from coursekit.policies import make_policy
     from coursekit.train import TrainConfig
 
@@ -254,17 +278,37 @@ def bench_act_pusht(args: argparse.Namespace) -> None:
     summary = _train(policy, batches, TrainConfig(**recipe, minutes=args.minutes, num_threads=args.threads,
                                                   progress=not args.no_progress), out, ds.meta)
     out, shipped = _maybe_ship(out, "act_pusht", args)
+    return out, summary, shipped
+
+
+def bench_act_pusht(args: argparse.Namespace) -> None:
+    """ACT on PushT state features (k = 20, temporal ensembling), PushT protocol; trained, or --checkpoint."""
+    from coursekit.checkpoint import load_checkpoint, read_checkpoint_info
+    from coursekit.evaluate import evaluate_pusht
+
+    if args.checkpoint:
+        out, shipped = Path(args.checkpoint), f"; evaluated: {args.checkpoint}"
+        summary = read_checkpoint_info(out)["training"]
+    else:
+        out, summary, shipped = _train_act_pusht(args)
     policy = load_checkpoint(out, device="cpu")
     n = 3 if args.quick else args.episodes
-    r = evaluate_pusht(policy, n_episodes=n, dataset_meta=ds.meta, progress=not args.no_progress,
-                       max_steps=30 if args.quick else 300)
-    print(f"ACT PushT: score {r.score:.3f}, success {r.success_rate:.2f}")
-    if not args.no_record:
-        note = (f"{n} held-out seeds, k=20, temporal ensembling m=0.01; trained {summary['steps']} steps / "
-                f"{summary['seconds'] / 60:.1f} min on {summary.get('torch_threads')} thread(s), 200 expert demos; "
-                f"success {r.success_rate:.0%}" + (f"; {args.note_concurrent}" if args.note_concurrent else "") + shipped)
-        cmd = f"{COMMAND} --only act_pusht --minutes {args.minutes:g} --threads {args.threads}" + (" --ship" if args.ship else "")
-        record(SECTION, "ACT PushT score (mean of max coverage)", round(r.score, 3), "", cmd, note=note)
+    r = evaluate_pusht(policy, n_episodes=n, dataset_meta=read_checkpoint_info(out)["dataset"],
+                       progress=not args.no_progress, max_steps=30 if args.quick else 300)
+    score, success = mean_estimate(r.max_reward), rate_estimate(np.asarray(r.success, dtype=bool))
+    print(f"ACT PushT: score {score}, success {success}")
+    if args.no_record:
+        return
+    demos = read_checkpoint_info(out)["dataset"].get("n_episodes")
+    note = (f"{n} held-out seeds ({_seeds_text(n)}), bootstrap 95 % interval; success {success.value:.1%} "
+            f"(Wilson 95 % {success.lo:.1%}-{success.hi:.1%}); k=20, temporal ensembling m=0.01; trained "
+            f"{_trained_text(summary)}, {demos} expert demos" + (f"; {args.note_concurrent}" if args.note_concurrent else "")
+            + shipped)
+    cmd = f"{COMMAND} --only act_pusht " + (f"--checkpoint {args.checkpoint}" if args.checkpoint else
+                                            f"--minutes {args.minutes:g}" + (" --ship" if args.ship else ""))
+    record(SECTION, "ACT PushT score (mean of max coverage)", round(score.value, 3), "",
+           f"{cmd} --episodes {n} --threads {args.threads}", note=note,
+           interval=(round(score.lo, 3), round(score.hi, 3)), n=n, seeds=_seeds_text(n))
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -272,11 +316,11 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--only", nargs="+", choices=SECTIONS, default=list(SECTIONS), help="sections to run")
     parser.add_argument("--minutes", type=float, default=30.0, help="training budget per policy (default 30)")
     parser.add_argument("--threads", type=int, default=2, help="torch threads for training and evaluation (default 2)")
-    parser.add_argument("--episodes", type=int, default=50, help="held-out evaluation episodes (default 50)")
+    parser.add_argument("--episodes", type=int, default=200, help="held-out evaluation episodes (protocol, default 200)")
     parser.add_argument("--repeats", type=int, default=15, help="latency repeats (default 15)")
     parser.add_argument("--latency-threads", type=int, default=None, help="torch threads for the latency section (default: torch's)")
     parser.add_argument("--seed", type=int, default=0, help="training seed (default 0)")
-    parser.add_argument("--checkpoint", default=None, help="evaluate this checkpoint instead of training (cube, insertion: ACT; dp_cube: Diffusion Policy)")
+    parser.add_argument("--checkpoint", default=None, help="evaluate this checkpoint instead of training (cube, insertion, act_pusht: ACT; dp_cube: Diffusion Policy)")
     parser.add_argument("--data-dir", default="outputs/data", help="where demonstrations are cached")
     parser.add_argument("--ckpt-dir", default="outputs/checkpoints", help="where trained checkpoints are written")
     parser.add_argument("--ship", action="store_true",
@@ -292,12 +336,16 @@ def main(argv: list[str] | None = None) -> None:
         parser.error("--ship with --quick would ship a smoke-run model over coursekit/checkpoints/; drop one of them")
     if args.ship and args.checkpoint:
         parser.error("--ship copies a freshly trained model; with --checkpoint nothing is trained: drop one of them")
+    if args.episodes < 1 or args.threads < 1:
+        parser.error(f"--episodes and --threads must be >= 1, got --episodes {args.episodes} --threads {args.threads}")
     if args.quick:
         args.minutes = min(args.minutes, 0.5)
         args.repeats = min(args.repeats, 3)
     Path(args.data_dir).mkdir(parents=True, exist_ok=True)
     for section in args.only:
         t0 = time.perf_counter()
+        if section != "latency":  # evaluations run on --threads (the latency section has its own setting)
+            torch.set_num_threads(args.threads)
         if section == "latency":
             bench_latency(args)
         elif section == "cube":

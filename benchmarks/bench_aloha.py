@@ -1,15 +1,17 @@
 """ALOHA arm pair: physics speed, camera frame time, scripted-expert success, demo generation time.
 
-Run: ``.venv/bin/python -m benchmarks.bench_aloha`` (about 2-4 minutes on 2 free cores).
-Options: ``--seeds N`` (success-rate seeds per task, default 100), ``--skip-success``,
+Run: ``.venv/bin/python -m benchmarks.bench_aloha`` (about 5 minutes on 2 free cores).
+Options: ``--only speed|success|generation`` (``--skip-success`` = ``--only speed``), ``--seeds N``
+(success-rate seeds per task, default 200 from ``--first-seed`` 100000: the protocol range),
 ``--no-record`` (print only).
 
 - Real-time factor: simulated seconds / wall seconds of ``env.step`` with state observations,
   replaying a scripted demonstration (so contacts and grasps are in the mix).
 - Frame time: one 240x320 "top" camera image (``env.render_camera``), median of 50.
-- Scripted success over seeds 0..N-1: the replayed demonstration judged STRICTLY on its final
-  state, the published lenient stage-4 success, and the end-effector (mocap) rollout's strict
-  success before replay.
+- Scripted success over the protocol seeds (the policies' held-out spawns): the replayed
+  demonstration judged STRICTLY on its final state, the published lenient stage-4 success, and
+  the end-effector (mocap) rollout's strict success before replay; each rate with its Wilson
+  95 % interval (:func:`coursekit.stats.rate_estimate`), ``n`` and ``seeds``.
 - Generation time: ``coursekit collect aloha-cube|aloha-insertion`` for 50 demonstrations
   (the collect function itself, failures and retries included; no file writing).
 """
@@ -25,12 +27,15 @@ import numpy as np
 
 from benchmarks.results import record
 from coursekit.envs.aloha import AlohaEnv
+from coursekit.stats import Estimate, rate_estimate
 from coursekit.experts.aloha_scripted import collect, scripted_episode
 from coursekit.experts.aloha_waypoints import EndEffectorScene
 
 COMMAND = ".venv/bin/python -m benchmarks.bench_aloha"
 SECTION = "ALOHA"
 TASK_LABEL = {"transfer_cube": "transfer cube", "insertion": "insertion"}
+PARTS = ("speed", "success", "generation")
+"""speed: physics real-time factor and camera frame; success: scripted success rates; generation: 50 demos' wall time."""
 
 
 def real_time_factor(task: str, repeats: int = 3) -> tuple[float, float]:
@@ -67,19 +72,18 @@ def frame_ms(height: int = 240, width: int = 320, n: int = 50) -> tuple[float, f
     return float(np.median(times) * 1e3), float(np.median(cpu) * 1e3)
 
 
-def success_rates(task: str, n_seeds: int) -> dict[str, float]:
-    """Strict (replay), lenient (replay) and strict (end-effector rollout) rates over seeds 0..n-1."""
+def success_rates(task: str, seeds: list[int]) -> dict[str, Estimate | list[int]]:
+    """Strict (replay), lenient (replay) and strict (end-effector rollout) rates over ``seeds``, each
+    with its Wilson interval, and the seeds whose replay failed the strict check."""
     env, scene = AlohaEnv(task), EndEffectorScene(task)
-    strict = lenient = ee_strict = 0
-    failed = []
-    for seed in range(n_seeds):
+    strict, lenient, ee_strict = [], [], []
+    for seed in seeds:
         episode, ee = scripted_episode(task, seed, env=env, scene=scene)
-        strict += bool(episode["strict_success"])
-        lenient += bool(episode["lenient_success"])
-        ee_strict += bool(ee["strict_success"])
-        if not episode["strict_success"]:
-            failed.append(seed)
-    return {"strict": strict / n_seeds, "lenient": lenient / n_seeds, "ee_strict": ee_strict / n_seeds, "failed": failed}
+        strict.append(bool(episode["strict_success"]))
+        lenient.append(bool(episode["lenient_success"]))
+        ee_strict.append(bool(ee["strict_success"]))
+    return {"strict": rate_estimate(np.asarray(strict)), "lenient": rate_estimate(np.asarray(lenient)),
+            "ee_strict": rate_estimate(np.asarray(ee_strict)), "failed": [s for s, ok in zip(seeds, strict) if not ok]}
 
 
 def generation_seconds(task: str, n_episodes: int = 50) -> tuple[float, float]:
@@ -93,14 +97,8 @@ def generation_seconds(task: str, n_episodes: int = 50) -> tuple[float, float]:
     return time.perf_counter() - t0, cpu() - c0
 
 
-def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, default=100, help="seeds per task for the success rates")
-    parser.add_argument("--skip-success", action="store_true", help="skip the success-rate and generation runs")
-    parser.add_argument("--no-record", action="store_true", help="print only; do not write results.json")
-    args = parser.parse_args(argv)
-    put = (lambda *a, **k: None) if args.no_record else record
-
+def part_speed(put) -> None:
+    """Physics real-time factor per task and the camera frame time (wall clock: load-dependent)."""
     load = f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores"
     for task in ("transfer_cube", "insertion"):
         wall, cpu = real_time_factor(task)
@@ -113,20 +111,35 @@ def main(argv: list[str] | None = None) -> None:
     put(SECTION, "240x320 camera frame", round(ms, 1), "ms", COMMAND, target="< 15",
         note=f"MUJOCO_GL=egl on the CPU (llvmpipe), shadows/reflections off; median of 50 wall clock; "
              f"{cpu_ms:.1f} ms CPU time; {load}")
-    if args.skip_success:
-        return
+
+
+def _put_rate(put, name: str, est: Estimate, cmd: str, seeds: str, note: str, target: str = "") -> None:
+    """A scripted success rate in percent, with its Wilson interval, n and seed range."""
+    put(SECTION, name, round(100 * est.value, 1), "%", cmd, target=target, note=f"Wilson 95 % interval; {note}",
+        interval=(round(100 * est.lo, 1), round(100 * est.hi, 1)), n=est.n, seeds=seeds)
+
+
+def part_success(put, n_seeds: int, first_seed: int) -> None:
+    """Scripted strict / lenient / end-effector success on seeds first_seed.. (the protocol range by default)."""
+    seeds = list(range(first_seed, first_seed + n_seeds))
+    span = f"{seeds[0]}-{seeds[-1]}"
+    cmd = f"{COMMAND} --only success --seeds {n_seeds} --first-seed {first_seed}"
     for task in ("transfer_cube", "insertion"):
         target = ">= 98 %" if task == "transfer_cube" else ">= 90 %"
-        rates = success_rates(task, args.seeds)
-        print(f"{task}: strict {rates['strict']:.0%}, lenient {rates['lenient']:.0%}, "
-              f"end-effector strict {rates['ee_strict']:.0%}; failed seeds {rates['failed']}")
-        note = f"seeds 0..{args.seeds - 1}; final-state check after joint-space replay"
-        put(SECTION, f"scripted strict success, {TASK_LABEL[task]}", round(100 * rates["strict"], 1), "%", COMMAND,
-            target=target, note=note)
-        put(SECTION, f"scripted lenient (published stage 4) success, {TASK_LABEL[task]}", round(100 * rates["lenient"], 1),
-            "%", COMMAND, note=f"seeds 0..{args.seeds - 1}; stage 4 reached at any step of the replay")
-        put(SECTION, f"scripted strict success before replay (mocap), {TASK_LABEL[task]}", round(100 * rates["ee_strict"], 1),
-            "%", COMMAND, note=note.replace("after joint-space replay", "in the end-effector scene"))
+        rates = success_rates(task, seeds)
+        print(f"{task}: strict {rates['strict']}, lenient {rates['lenient']}, end-effector strict {rates['ee_strict']}; "
+              f"failed seeds {rates['failed']}")
+        label = TASK_LABEL[task]
+        _put_rate(put, f"scripted strict success, {label}", rates["strict"], cmd, span,
+                  f"spawn seeds {span}; final-state check after joint-space replay", target)
+        _put_rate(put, f"scripted lenient (published stage 4) success, {label}", rates["lenient"], cmd, span,
+                  f"spawn seeds {span}; stage 4 reached at any step of the replay")
+        _put_rate(put, f"scripted strict success before replay (mocap), {label}", rates["ee_strict"], cmd, span,
+                  f"spawn seeds {span}; final-state check in the end-effector scene")
+
+
+def part_generation(put) -> None:
+    """Wall time of collecting 50 demonstrations per task (load-dependent)."""
     for task in ("transfer_cube", "insertion"):
         seconds, cpu = generation_seconds(task)
         print(f"{task}: 50 demonstrations in {seconds:.1f} s wall clock, {cpu:.1f} s CPU")
@@ -134,6 +147,26 @@ def main(argv: list[str] | None = None) -> None:
             note=f"coursekit collect aloha-cube|aloha-insertion without file writing (2 worker processes); {cpu:.1f} s CPU "
                  f"time; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
 
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--only", nargs="+", choices=PARTS, default=list(PARTS), help="parts to run (default all)")
+    parser.add_argument("--seeds", type=int, default=200, help="seeds per task for the success rates (protocol: 200)")
+    parser.add_argument("--first-seed", type=int, default=100_000, help="first spawn seed of the success rates "
+                                                                          "(protocol: 100000; demonstrations use 0..)")
+    parser.add_argument("--skip-success", action="store_true", help="= --only speed")
+    parser.add_argument("--no-record", action="store_true", help="print only; do not write results.json")
+    args = parser.parse_args(argv)
+    if args.seeds < 1 or args.first_seed < 0:
+        parser.error(f"need --seeds >= 1 and --first-seed >= 0, got --seeds {args.seeds} --first-seed {args.first_seed}")
+    parts = ["speed"] if args.skip_success else args.only
+    put = (lambda *a, **k: None) if args.no_record else record
+    if "speed" in parts:
+        part_speed(put)
+    if "success" in parts:
+        part_success(put, args.seeds, args.first_seed)
+    if "generation" in parts:
+        part_generation(put)
 
 if __name__ == "__main__":
     main()

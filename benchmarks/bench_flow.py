@@ -16,8 +16,9 @@ Run: ``.venv/bin/python -m benchmarks.bench_flow`` (about 10 minutes on one thre
 - ``latency``: one chunk at batch 1 (B=1, To observations), median over ``--repeats`` rounds in
   which flow 1/2/4/10 Euler steps, flow midpoint-2, DP DDIM-10 and ACT (``act_pusht``, one pass with z = 0) take
   turns, so that a shared machine's load hits all alike.
-- ``shipped``: the flow checkpoint's own default (Euler-10) on 50 seeds, as ``coursekit eval``
-  runs it (``tests/test_shipped_checkpoints.py`` re-checks the checkpoint episode by episode).
+- ``shipped``: the flow checkpoint's own default (Euler-10) on ``--episodes`` (default 200) protocol
+  seeds, as ``coursekit eval`` runs it, with a bootstrap interval
+  (``tests/test_shipped_checkpoints.py`` re-checks the checkpoint episode by episode).
 - ``spacing``: chapter 10's question ("can ten steps collapse to one?") on equal terms. The DP
   checkpoint's own DDIM spacing is diffusers' "leading" one, whose single step queries t = 0 and
   so returns near-noise (chapter 4): Euler-1 against that DDIM-1 compares a flow head with a
@@ -192,14 +193,16 @@ def part_latency(args: argparse.Namespace, rec) -> None:
 
 
 def part_shipped(args: argparse.Namespace, rec) -> None:
-    seeds = heldout_seeds(50)
-    d = evaluate_cached(CKPT["flow"], None, None, seeds, args.out / "eval_flow_default_50.json", reuse=not args.fresh)
+    seeds = heldout_seeds(args.episodes)
+    d = evaluate_cached(CKPT["flow"], None, None, seeds, args.out / f"eval_flow_default_{args.episodes}.json",
+                        reuse=not args.fresh)
     score = mean_estimate(d["max_reward"])
     rate = rate_estimate(np.asarray(d["success"], dtype=bool))
-    print(f"shipped flow (its default, Euler-10), 50 seeds: score {score}, success {rate.value:.0%}")
+    print(f"shipped flow (its default, Euler-10), {args.episodes} seeds: score {score}, success {rate}")
     rec(SECTION, "shipped flow checkpoint score, Euler-10 (notebook 10)", round(score.value, 3), "",
-        f"{COMMAND} --only shipped",
-        note=f"success {rate.value:.0%}; 50 held-out seeds from 100000, 300 steps, the checkpoint's default sampler; "
+        f"{COMMAND} --only shipped --episodes {args.episodes} --threads {args.threads}",
+        note=f"success {rate.value:.1%} (Wilson 95 % {rate.lo:.1%}-{rate.hi:.1%}); {args.episodes} held-out seeds from "
+             f"100000, 300 steps, the checkpoint's default sampler; "
              f"trained {training_note(CKPT['flow'])} (float16 weights); evaluated with {d['torch_threads']} torch "
              f"thread(s); the checkpoint's own sampler, as `coursekit eval` runs it",
         interval=(round(score.lo, 3), round(score.hi, 3)), n=score.n, seeds=f"{seeds[0]}-{seeds[-1]}")
@@ -232,7 +235,7 @@ def part_spacing(args: argparse.Namespace, rec) -> None:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--only", choices=["score", "latency", "shipped", "spacing"], default=None, help="run one part")
-    parser.add_argument("--episodes", type=int, default=200, help="held-out episodes for the score part (default 200)")
+    parser.add_argument("--episodes", type=int, default=200, help="held-out episodes of the score, shipped and spacing parts (default 200)")
     parser.add_argument("--repeats", type=int, default=30, help="latency rounds (default 30)")
     parser.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
     parser.add_argument("--out", type=Path, default=ROOT / "outputs" / "bench_flow", help="evaluation cache directory")

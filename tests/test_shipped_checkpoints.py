@@ -5,7 +5,7 @@ the outcome of each of 12 held-out episodes under the command a student uses (``
 CKPT --episodes 12 --threads 1``: the checkpoint's own sampler and executor), with the weights'
 sha256; ``python -m benchmarks.shipped_golden`` wrote it. Here the same command runs again and is
 compared episode by episode, which catches a stale checkpoint, a changed sampler or executor, or a
-changed environment even where a mean over 50 episodes would hide it. Evaluation is deterministic
+changed environment even where a mean over 200 episodes would hide it. Evaluation is deterministic
 by seed: on the machine fingerprint the golden file records (torch build, CPU) every episode must
 match exactly; elsewhere a network's sums round differently and a contact-rich rollout can amplify
 that, so one episode in twelve may differ. The quality figures are the checkpoints' rows in

@@ -81,12 +81,13 @@ def test_a_tag_naming_no_row_is_reported():
 
 
 def test_a_small_n_left_unsaid_is_reported():
-    body = "ACT PushT score (mean of max coverage)"  # 50 held-out seeds, says its note
-    text = _real(body)
-    assert "on 50 held-out PushT seeds" in text and _messages(text) == []
-    messages = _messages(text.replace("on 50 held-out PushT seeds", "on PushT"))
-    assert len(messages) == 1 and "n = 50 < 200" in messages[0], messages
-    assert check_text.row_n(TABLE["ACT/" + body]) == 50
+    body = "DP DDIM-10 minus chunked regression, two-way starts"  # a subset row: 78 of the 200 protocol seeds
+    stated = "on the 78 two-way starts"
+    text = next(t for _, t in _texts() if f"<!-- row: {body} -->" in t and stated in t)
+    assert _messages(text) == []
+    messages = _messages(text.replace(stated, "on the two-way starts"))
+    assert len(messages) == 1 and "n = 78 < 200" in messages[0], messages
+    assert check_text.row_n(TABLE["Claims (PushT, shipped checkpoints)/" + body]) == 78
 
 
 TOY = {"S/score": {"section": "S", "name": "score", "value": 0.945, "unit": "", "interval": [0.913, 0.974], "n": 200,
