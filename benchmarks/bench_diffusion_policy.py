@@ -246,7 +246,6 @@ def main(argv: list[str] | None = None) -> None:
         if side.exitcode != 0:
             raise RuntimeError(f"the regression training process failed (exit code {side.exitcode})")
         summaries["regression"] = read_checkpoint_info(outs["regression"])["training"]
-    scores = {}
     for kind in kinds:
         out = outs[kind]
         summary = summaries.get(kind) or train_policy(kind, dataset, args, out)
@@ -263,13 +262,13 @@ def main(argv: list[str] | None = None) -> None:
             r = evaluate_pusht(policy, n_episodes=args.episodes, sampler=sampler, num_inference_steps=steps,
                                dataset_meta=dataset_meta)
             label = f"{kind} {sampler.upper()}-{steps}" if sampler else kind
-            scores[label] = r
             print(f"{label}: score {r.score:.3f} +- {r.summary()['score_stderr']:.3f}, success {r.success_rate:.0%}, "
                   f"{summary['steps']} steps in {summary['seconds']:.0f} s, eval {time.perf_counter() - t0:.0f} s")
 
-    # Printed, not recorded: a minutes budget on one training seed, 50 seeds by default, is no protocol
-    # figure (bench_chunk_ablation's step-budget curve over 3 training seeds is).
+    # Printed, not recorded: a minutes budget on one training seed is no protocol figure
+    # (bench_chunk_ablation's step-budget curve over 3 training seeds is).
     print("score part: printed only, not written to results.json (see bench_chunk_ablation for the budget curve)")
+
 
 if __name__ == "__main__":
     main()
