@@ -229,8 +229,9 @@ def train(policy: Any, batches: Iterable[dict[str, Any]], config: TrainConfig, *
             so a checkpoint states its whole training, not only the last segment.
         state_file: resume file (step budgets only; see :mod:`coursekit.train_state`): if it exists
             the run continues from it exactly (the same bytes as an uninterrupted run); it is
-            rewritten every ``log_every`` steps at most every ``STATE_EVERY_S`` seconds, so a killed
-            run loses at most that much work.
+            rewritten at the first log point once ``STATE_EVERY_S`` seconds (or
+            ``checkpoint_every_minutes``, if shorter) have passed since the last write, so a killed
+            run loses at most that much work plus ``log_every`` steps.
     """
     threads_before = torch.get_num_threads()
     if config.num_threads is not None:
