@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.protocol import add_protocol_args, protocol_seeds, t_estimate
+from coursekit.atomic import atomic_write_text
 
 SECTION = "Chunk ablation (arm pair)"
 COMMAND = ".venv/bin/python -m benchmarks.bench_act_chunks"
@@ -68,25 +69,16 @@ def demonstrations(out: Path):
 
 def train_or_load(name: str, ts: int, args: argparse.Namespace, dataset):
     """The variant ``name`` trained with seed ``ts`` for ``--steps`` (resumed or loaded from ``--out``)."""
-    import torch
-
-    from coursekit.checkpoint import CheckpointSaver, load_checkpoint
+    from benchmarks.resumable import is_trained, train_steps
+    from coursekit.checkpoint import load_checkpoint
     from coursekit.policies import make_policy
-    from coursekit.train import TrainConfig, train
 
     slug = re.sub(r"[^a-z0-9]+", "-", name.lower()).strip("-")
     run = args.out / f"{slug}_seed{ts}_s{args.steps}"
-    if (run / "config.json").exists():
+    if is_trained(run):
         return load_checkpoint(run, device="cpu"), run
     policy, batches, recipe = make_policy("act", dataset, recipe="cpu", seed=ts, **VARIANTS[name])
-    torch.manual_seed(ts)
-    state = args.out / f".{run.name}.state.pt"  # removed once the checkpoint is written
-    config = TrainConfig(**{**recipe, "max_steps": args.steps, "seed": ts, "num_threads": args.threads,
-                            "progress": False, "checkpoint_every_minutes": None})
-    result = train(policy, batches, config, callbacks=[CheckpointSaver(run, dataset_meta=dataset.meta)],
-                   state_file=state)
-    state.unlink(missing_ok=True)
-    return result.policy, run
+    return train_steps(policy, batches, recipe, run, args.steps, ts, args.threads, dataset.meta), run
 
 
 def executor_factory(executor: str, k: int):
@@ -112,9 +104,7 @@ def evaluate_run(policy, run: Path, executor: str, seeds: list[int], dataset_met
                                dataset_meta=dataset_meta, progress=False, max_steps=EPISODE_STEPS)
             part = {"seed": block, "strict": (r.states[:, -1, 1] > 0.5).tolist(),
                     "stage": r.states[:, :, 0].max(axis=1).astype(int).tolist(), "seconds": r.seconds}
-            tmp = path.with_suffix(".tmp")
-            tmp.write_text(json.dumps(part))
-            tmp.replace(path)
+            atomic_write_text(path, json.dumps(part))  # a killed run leaves no half-written block
         part = json.loads(path.read_text())
         for key in ("seed", "strict", "stage"):
             out[key] += part[key]

@@ -2,9 +2,9 @@
 
     # DP score vs Ta on the SHIPPED checkpoint (Ta is an execution choice: no retraining)
     .venv/bin/python -m benchmarks.bench_chunk_ablation --only ta --episodes 200 --threads 1
-    # four heads, same data and budget, three training seeds each (about 4 x 3 x --minutes of CPU)
-    .venv/bin/python -m benchmarks.bench_chunk_ablation --only train --minutes 30 --train-seeds 0 1 2 --threads 1
-    .venv/bin/python -m benchmarks.bench_chunk_ablation --only train --minutes 0.2 --episodes 2 --no-record  # smoke
+    # the heads, same data and step budget, three training seeds each (one run per core, resumable)
+    .venv/bin/python -m benchmarks.bench_chunk_ablation --only train --steps 6000 --train-seeds 0 1 2 --threads 1
+    .venv/bin/python -m benchmarks.bench_chunk_ablation --only train --steps 20 --episodes 2 --no-record  # smoke
 
 Parts:
 
@@ -15,7 +15,7 @@ Parts:
   Ta executes longer open-loop stretches (compounding error); Chi et al. 2023, Sec. 3.1 / Fig. 6.
 - ``train``: the variants of :data:`VARIANTS` (single-step regression, chunked regression, ACT,
   DP) on the same demonstrations (``--data``, default the shipped models' 400 DART 0/5 episodes)
-  and features (``pusht_keypoints``), the same budget (``--minutes`` or ``--steps``, the "cpu"
+  and features (``pusht_keypoints``), the same step budget (``--steps``, the "cpu"
   recipe, one thread), each with every seed of ``--train-seeds``; evaluated on the same seeds.
   A row per variant: the mean score over training seeds, a t-interval over training seeds
   (95 %; with 3 seeds it is wide on purpose), and the per-seed scores in the note. The same
@@ -24,24 +24,29 @@ Parts:
   Policy's lead over each regression variant on both subsets, paired by training seed (the
   chapter-1 question: is the gap larger where the demonstrations split?).
 
-Per-episode results go under ``--out`` (resumable: an existing run or evaluation is reused).
+Per-episode results go under ``--out``, a cache outside the repository: an existing run or
+evaluation is reused, and a killed training run resumes where it stopped (``benchmarks.resumable``).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import re
 from pathlib import Path
 
 import numpy as np
 
 from benchmarks.protocol import add_protocol_args, protocol_seeds, t_estimate
+from coursekit.atomic import atomic_write_text
 
 SECTION = "Chunk ablation (PushT)"
 ROOT = Path(__file__).resolve().parent.parent
 DATA = ROOT / "outputs" / "data" / "pusht_400ep_seed0_noise0-5.npz"
 """What ``coursekit collect pusht --episodes 400 --seed 0 --action-noise 0,5`` writes: the shipped models' data."""
+CACHE = Path(os.environ.get("XDG_CACHE_HOME", "~/.cache")).expanduser() / "coursekit" / "chunk_ablation"
+"""Where the trained runs and their evaluations live (outside the repository; resumable)."""
 VARIANTS = {
     "single-step regression (To=1, Tp=Ta=1)": ("regression", {"n_obs_steps": 1, "horizon": 1, "n_action_steps": 1,
                                                                "unet": {"down_dims": (256,)}}, {}),
@@ -71,7 +76,7 @@ def evaluate_saved(policy, path: Path, seeds: list[int], meta: dict | None, samp
     r = evaluate_pusht(policy, seeds=seeds, dataset_meta=meta, progress=False, **sampling)
     saved = {"seeds": seeds, "max_reward": r.max_reward.tolist(), "success": r.success.tolist(), "seconds": r.seconds,
              "n_action_steps": policy.config.n_action_steps, **{k: v for k, v in sampling.items()}}
-    path.write_text(json.dumps(saved) + "\n")
+    atomic_write_text(path, json.dumps(saved) + "\n")  # a killed evaluation leaves no half-written file
     return saved
 
 
@@ -90,7 +95,7 @@ def part_ta(args, seeds: list[int], rec) -> None:
             data = np.load(claims)
             if data["seeds"].tolist() == seeds:
                 out = args.out / f"{prefix}ta{ta}_{seeds[0]}_{len(seeds)}.json"
-                out.write_text(json.dumps({"seeds": seeds, "max_reward": data["max_reward"].tolist(),
+                atomic_write_text(out, json.dumps({"seeds": seeds, "max_reward": data["max_reward"].tolist(),
                                            "success": data["success"].tolist(), "seconds": float(data["seconds"]),
                                            "from": str(claims.relative_to(ROOT))}) + "\n")
         saved = evaluate_saved(policy, args.out / f"{prefix}ta{ta}_{seeds[0]}_{len(seeds)}.json", seeds, meta, sampling)
@@ -102,33 +107,21 @@ def part_ta(args, seeds: list[int], rec) -> None:
 
 def train_or_load(name: str, ts: int, args, dataset):
     """The variant ``name`` trained with training seed ``ts`` (or loaded from ``--out``): (policy, run dir)."""
-    import torch
-
-    from coursekit.checkpoint import CheckpointSaver, load_checkpoint
+    from benchmarks.resumable import is_trained, train_steps
+    from coursekit.checkpoint import load_checkpoint
     from coursekit.nn.unet1d import UNet1DConfig
     from coursekit.policies import make_policy
-    from coursekit.train import TrainConfig, train
 
     kind, fields, _ = VARIANTS[name]
-    budget = {"max_steps": args.steps} if args.steps else {"minutes": args.minutes}
     slug = re.sub(r"[^a-z0-9]+", "-", name.lower()).strip("-")
-    run = args.out / f"{slug}_seed{ts}_{'s' + str(args.steps) if args.steps else f'{args.minutes:g}min'}"
-    if (run / "config.json").exists():
+    run = args.out / f"{slug}_seed{ts}_s{args.steps}"
+    if is_trained(run):
         return load_checkpoint(run, device="cpu"), run
     cfg = dict(fields)
     if "unet" in cfg:
         cfg["unet"] = UNet1DConfig(**cfg["unet"])
     policy, batches, recipe = make_policy(kind, dataset, features="pusht_keypoints", recipe="cpu", seed=ts, **cfg)
-    torch.manual_seed(ts)
-    # A step budget resumes exactly after a kill (coursekit.train_state): the state lives beside the
-    # run folder in the cache and is removed once the run's checkpoint is written.
-    state = args.out / f".{run.name}.state.pt" if args.steps else None
-    result = train(policy, batches, TrainConfig(**{**recipe, **budget, "seed": ts, "num_threads": args.threads,
-                                                   "progress": False, "checkpoint_every_minutes": None}),
-                   callbacks=[CheckpointSaver(run, dataset_meta=dataset.meta)], state_file=state)
-    if state is not None:
-        state.unlink(missing_ok=True)
-    return result.policy, run  # the EMA weights: what the checkpoint holds (``policy`` itself keeps the raw ones)
+    return train_steps(policy, batches, recipe, run, args.steps, ts, args.threads, dataset.meta), run
 
 
 def part_train(args, seeds: list[int], rec) -> None:
@@ -140,8 +133,8 @@ def part_train(args, seeds: list[int], rec) -> None:
     two = np.array([flags[s]["two_way"] for s in seeds])  # (n,) bool
     subsets = {"all starts": np.ones_like(two), "two-way starts": two, "other starts": ~two}
     conditions = (f"{args.data.name}, pusht_keypoints, recipe cpu, budget "
-                  f"{f'{args.steps} steps' if args.steps else f'{args.minutes:g} min'}, {args.threads} thread(s)")
-    budget = f", {args.steps} steps" if args.name_budget and args.steps else ""  # the budget curve's rows
+                  f"{args.steps} steps, {args.threads} thread(s)")
+    budget = f", {args.steps} steps" if args.name_budget else ""  # the budget curve's rows
     rewards: dict[str, np.ndarray] = {}  # variant -> (training seeds, n) max reward
     for name, (_, _, sampling) in VARIANTS.items():
         if args.variants and not any(v in name for v in args.variants):
@@ -184,12 +177,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--ta", type=int, nargs="+", default=[15, 8, 4, 2, 1], help="Ta values (part ta)")
     parser.add_argument("--train-seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--variants", nargs="+", default=[], help="substrings of variant names to run (default all)")
-    parser.add_argument("--minutes", type=float, default=30.0, help="training budget per run (wall clock)")
-    parser.add_argument("--steps", type=int, default=None, help="training budget in optimiser steps instead")
+    parser.add_argument("--steps", type=int, default=6000,
+                        help="training budget per run in optimiser steps (a step budget: sharing a core cannot change it)")
     parser.add_argument("--name-budget", action="store_true",
                         help="put the step budget in the row names (the budget curve: one set of rows per --steps)")
     parser.add_argument("--data", type=Path, default=DATA)
-    parser.add_argument("--out", type=Path, default=ROOT / "outputs" / "bench_chunk_ablation")
+    parser.add_argument("--out", type=Path, default=CACHE, help=f"trained runs and evaluations (default {CACHE})")
     args = parser.parse_args(argv)
     seeds = protocol_seeds(args)
     if args.only == "train" and not args.data.exists():
@@ -199,8 +192,7 @@ def main(argv: list[str] | None = None) -> int:
     cmd = f".venv/bin/python -m benchmarks.bench_chunk_ablation --only {args.only} --episodes {args.episodes} " \
           f"--seed-start {args.seed_start} --threads {args.threads}" + (f" --policy {args.policy}" if args.only == "ta" else "")
     if args.only == "train":
-        cmd += f" --train-seeds {' '.join(map(str, args.train_seeds))} " + (f"--steps {args.steps}" if args.steps
-                                                                             else f"--minutes {args.minutes:g}")
+        cmd += f" --train-seeds {' '.join(map(str, args.train_seeds))} --steps {args.steps}"
         cmd += "".join(f" --variants '{v}'" if i == 0 else f" '{v}'" for i, v in enumerate(args.variants))
         cmd += " --name-budget" if args.name_budget else ""
 

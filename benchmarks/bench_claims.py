@@ -88,6 +88,7 @@ def load_policy(name: str):
 
 def evaluate_or_load(name: str, seeds: list[int], out: Path) -> dict[str, np.ndarray]:
     """Per-episode arrays (seeds, max_reward, success, length, states (N, T+1, 5) float32) of one policy."""
+    from coursekit.atomic import atomic_path
     from coursekit.evaluate import evaluate_pusht
 
     path = out / f"eval_{name}_{seeds[0]}_{len(seeds)}.npz"
@@ -101,9 +102,8 @@ def evaluate_or_load(name: str, seeds: list[int], out: Path) -> dict[str, np.nda
     r = evaluate_pusht(policy, seeds=seeds, dataset_meta=meta, record=True, **sampling)
     data = {"seeds": np.asarray(seeds), "max_reward": r.max_reward, "success": r.success, "length": r.length,
             "states": r.states[..., :5].astype(np.float32), "seconds": np.asarray(r.seconds)}
-    tmp = path.with_suffix(".tmp.npz")
-    np.savez_compressed(tmp, **data)
-    tmp.replace(path)
+    with atomic_path(path, suffix=".npz") as tmp:  # a killed evaluation leaves no half-written file
+        np.savez_compressed(tmp, **data)
     print(f"{name}: score {r.score:.3f}, success {r.success_rate:.1%} on {len(seeds)} seeds, {r.seconds:.0f} s -> {path}")
     return data
 

@@ -37,6 +37,7 @@ import numpy as np
 
 from benchmarks.results import record
 from benchmarks.train_head import HEADS as TRAINED, TRAINED_HEADS, command as train_command
+from coursekit.atomic import atomic_write_text
 from coursekit.execution.rtc import STRATEGIES
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -137,9 +138,7 @@ def evaluate_blocks(policy, name: str, strategy: str, d: int, seeds: list[int], 
             parts.append(json.loads(f.read_text()))
             continue
         part = run_block(run, name, strategy, d, b, args)
-        tmp = f.with_suffix(".tmp")
-        tmp.write_text(json.dumps(part))
-        tmp.replace(f)  # atomic: a killed run leaves no half-written block
+        atomic_write_text(f, json.dumps(part))  # a killed run leaves no half-written block
         parts.append(part)
         print(f"  {HEADS[name][3]} {strategy} d={d}{'' if s is None else f' s={s}'} seeds {b[0]}..{b[-1]}: "
               f"{np.mean(part['max_reward']):.3f} ({part['seconds']:.0f} s)", flush=True)

@@ -71,6 +71,8 @@ def frames_and_keypoints(data: Path, limit: int | None) -> tuple[np.ndarray, np.
 def part_pretrain(args: argparse.Namespace, record) -> None:
     import torch
 
+    from coursekit.atomic import atomic_path
+    from coursekit.config import config_to_dict
     from coursekit.nn.vision import VisionEncoder
     from coursekit.nn.vision_pretrain import PretrainConfig, predict_targets, pretrain_encoder
 
@@ -96,8 +98,9 @@ def part_pretrain(args: argparse.Namespace, record) -> None:
           f"(median {np.median(per_frame):.1f}, n={est.n} frames of {len(np.unique(episode[held]))} episodes)")
     path = args.out / f"encoder_pretrained_s{config.steps}_seed{args.seed}.pt"
     args.out.mkdir(parents=True, exist_ok=True)
-    torch.save({"encoder": encoder.state_dict(), "config": json.dumps(encoder.config.__dict__, default=list),
-                "readout": out["readout"].state_dict(), "mean": out["mean"], "std": out["std"]}, path)  # the cache
+    with atomic_path(path) as tmp:  # the cache stage 2 loads; a killed write leaves no half file
+        torch.save({"encoder": encoder.state_dict(), "config": json.dumps(config_to_dict(encoder.config)),
+                    "readout": out["readout"].state_dict(), "mean": out["mean"], "std": out["std"]}, tmp)
     cmd = f"{COMMAND} --only pretrain --pretrain-steps {config.steps} --batch-size {config.batch_size} --threads {args.threads}"
     note = (f"8 block keypoints (world px, 512 px wide world), mean distance per frame over the frames of the last "
             f"{len(np.unique(episode[held]))} of {episode.max() + 1} demonstrations (never trained on); encoder 16-128 one block per stage, "
@@ -128,24 +131,17 @@ def _pixel_policy(args: argparse.Namespace, dataset):
 
 
 def part_policy(args: argparse.Namespace, record) -> None:
-    import torch
-
     from benchmarks.bench_chunk_ablation import evaluate_saved
-    from coursekit.checkpoint import CheckpointSaver, load_checkpoint, read_checkpoint_info
+    from benchmarks.resumable import is_trained, train_steps
+    from coursekit.checkpoint import load_checkpoint, read_checkpoint_info
     from coursekit.data.episodes import EpisodeDataset
     from coursekit.stats import mean_estimate
-    from coursekit.train import TrainConfig, train
 
     run = args.out / f"dp_{args.route}_p{args.pretrain_steps if args.route == 'two-stage' else 0}_s{args.policy_steps}_seed{args.seed}"
     dataset = EpisodeDataset.load(args.data)
-    if not (run / "config.json").exists():
+    if not is_trained(run):
         policy, batches, recipe = _pixel_policy(args, dataset)
-        torch.manual_seed(args.seed)
-        state = args.out / f".{run.name}.state.pt"  # resume state, removed once the checkpoint is written
-        config = TrainConfig(**{**recipe, "max_steps": args.policy_steps, "seed": args.seed, "num_threads": args.threads,
-                                "progress": False, "checkpoint_every_minutes": None})
-        train(policy, batches, config, callbacks=[CheckpointSaver(run, dataset_meta=dataset.meta)], state_file=state)
-        state.unlink(missing_ok=True)
+        train_steps(policy, batches, recipe, run, args.policy_steps, args.seed, args.threads, dataset.meta)
     policy, training = load_checkpoint(run, device="cpu"), read_checkpoint_info(run)["training"]
     seeds = list(range(100_000, 100_000 + args.episodes))
     saved = evaluate_saved(policy, run / f"eval_{seeds[0]}_{len(seeds)}.json", seeds, dataset.meta, {})

@@ -4,10 +4,9 @@
 
 Each head is trained like a shipped one (same demonstrations, features, recipe and seed) with one
 change, named in :data:`HEADS`. The run is a step budget written to ``TRAINED_HEADS/<dir>`` (never
-the repository); its resume state (:mod:`coursekit.train_state`) lives beside it as
-``.<dir>.state.pt`` and is rewritten every minute, so a stopped machine loses at most a minute:
-run the same command again and it continues with the same bytes as an uninterrupted run. The state
-is removed once the checkpoint is written; a finished head is never overwritten (delete it first).
+the repository) by :func:`benchmarks.resumable.train_steps`: a stopped machine loses at most a
+minute, and the same command continues with the same bytes as an uninterrupted run. A finished
+head is never overwritten (delete it first).
 
 - ``flow-tp32``: the flow head of chapter 10 with a longer chunk, Tp = 32 (usable horizon
   H = Tp - To + 1 = 31), so that chapter 11's real-time chunking has a soft region at d = 4-8
@@ -40,32 +39,24 @@ def command(name: str) -> str:
 
 def train_head(name: str, data: Path, threads: int = 1, progress: bool = True) -> Path:
     """Train (or continue training) the head ``name`` on the demonstrations ``data``; returns its folder."""
-    import torch
-
-    from coursekit.checkpoint import CheckpointSaver
+    from benchmarks.resumable import state_path, train_steps
     from coursekit.data.episodes import EpisodeDataset
     from coursekit.policies import make_policy
-    from coursekit.train import TrainConfig, train
 
     spec = HEADS[name]
     out = TRAINED_HEADS / spec["dir"]
-    state = out.parent / f".{out.name}.state.pt"
+    state = state_path(out)
     if out.exists() and not state.is_file():  # with a state beside it, a kill hit the final write: finish the run
         raise SystemExit(f"{out} exists: {name} is trained (delete the folder to train it again)")
     if not data.is_file():
         raise SystemExit(f"--data {data} does not exist (make it with: coursekit collect pusht --episodes 400 --seed 0 "
                          f"--action-noise 0,5 --out {data})")
-    out.parent.mkdir(parents=True, exist_ok=True)
     dataset = EpisodeDataset.load(data)
     policy, batches, recipe = make_policy(spec["policy"], dataset, features="pusht_keypoints", recipe="cpu",
                                           seed=spec["seed"], **spec["fields"])
-    torch.manual_seed(spec["seed"])
     print(f"{name}: {spec['policy']} policy, {spec['fields']}, {spec['steps']} steps"
           f"{' (resuming ' + str(state) + ')' if state.is_file() else ''} -> {out}", flush=True)
-    config = TrainConfig(**{**recipe, "max_steps": spec["steps"], "seed": spec["seed"], "num_threads": threads,
-                            "progress": progress, "checkpoint_every_minutes": None})
-    train(policy, batches, config, callbacks=[CheckpointSaver(out, dataset_meta=dataset.meta)], state_file=state)
-    state.unlink(missing_ok=True)
+    train_steps(policy, batches, recipe, out, spec["steps"], spec["seed"], threads, dataset.meta, progress)
     return out
 
 

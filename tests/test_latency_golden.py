@@ -7,9 +7,11 @@ bit: the guided samples of the diffusion (DDIM, DDPM) and flow (Euler) heads, an
 scores, chunk switches and smoothness of seeded episodes under every delay strategy.
 
 Bit-identity holds for the torch build and CPU the values were recorded on (the fingerprint
-stored with them). Elsewhere a network's sums round differently and a contact-rich rollout
-amplifies that, so there the guided chunks are compared to 1e-3 px and episodes on their first
-chunk's actions only.
+stored with them: torch build, vector extension and CPU model; an AMD EPYC with the same AVX512
+path as the recording Intel Xeon rounds differently). Elsewhere a network's sums round
+differently, so there the guided chunks are compared to 1e-3 px, and the 32-step episodes (too
+short for contact to amplify rounding: on the EPYC their actions stay within 2.5e-4 px and their
+states within 7.6e-4 of the recording) to 1e-2 px, with the chunk switches and calls exact.
 """
 
 from __future__ import annotations
@@ -59,8 +61,11 @@ SMOOTHNESS_KEYS = ("max_step", "switch_jump", "other_step", "max_jerk")
 
 
 def fingerprint() -> str:
-    """Where bit-identity is promised: the torch build and the CPU's vector extensions."""
-    return f"torch {torch.__version__} {platform.machine()} {torch.backends.cpu.get_cpu_capability()}"
+    """Where bit-identity is promised: the torch build, the CPU's vector extensions and its model."""
+    from benchmarks.shipped_golden import fingerprint as machine
+
+    return (f"torch {torch.__version__} {platform.machine()} {torch.backends.cpu.get_cpu_capability()} "
+            f"{machine()['cpu']}")
 
 
 def load_heads() -> dict:
@@ -130,8 +135,13 @@ def test_guided_chunk_is_as_recorded(policies, golden, name):
 @pytest.mark.parametrize("name", sorted(EPISODES))
 def test_delayed_episodes_are_as_recorded(policies, golden, name):
     got = delayed_episodes(policies, name)
-    if not exact(golden):  # another CPU: only the first chunk's actions, before the rollout amplifies rounding
-        np.testing.assert_allclose(got["actions"][:, :4], golden[f"episode/{name}/actions"][:, :4], rtol=0, atol=1e-3)
+    if not exact(golden):  # another CPU: rounding, not amplified in 32 steps; the schedule itself is exact
+        for key, value in got.items():
+            want = golden[f"episode/{name}/{key}"]
+            if key in ("switches", "chunk_calls", "success", "length"):
+                np.testing.assert_array_equal(value, want, err_msg=f"{name}: {key}")
+            else:  # px (actions, states, smoothness), radians (block angle) and coverage (max_reward)
+                np.testing.assert_allclose(value, want, rtol=0, atol=1e-2, err_msg=f"{name}: {key}")
         return
     for key, value in got.items():
         want = golden[f"episode/{name}/{key}"]

@@ -8,7 +8,10 @@ compared episode by episode, which catches a stale checkpoint, a changed sampler
 changed environment even where a mean over 200 episodes would hide it. Evaluation is deterministic
 by seed: on the machine fingerprint the golden file records (torch build, CPU) every episode must
 match exactly; elsewhere a network's sums round differently and a contact-rich rollout can amplify
-that, so one episode in twelve may differ. The quality figures are the checkpoints' rows in
+that into another outcome (on an AMD EPYC, against the Intel Xeon recording, 4 of the deterministic
+regressor's 12 episodes ended differently, the other heads' at most 1), so up to half may differ
+there: a changed sampler, executor or environment alters an episode from its first step on and
+so changes nearly all twelve. The quality figures are the checkpoints' rows in
 ``benchmarks/results.json`` (more seeds, their own benchmarks); the first test ties each
 checkpoint to its row. The reproductions are marked ``slow`` (``make test`` runs them, ``make
 test-fast`` not): about a minute in all.
@@ -74,6 +77,6 @@ def test_shipped_checkpoint_reproduces_its_golden_episodes(name, tmp_path):
     golden = GOLDEN["checkpoints"][name]
     summary = eval_episodes(SHIPPED / name, tmp_path)
     differ = _differing(summary["per_episode"], golden["per_episode"])
-    allowed = 0 if fingerprint() == GOLDEN["fingerprint"] else 1
+    allowed = 0 if fingerprint() == GOLDEN["fingerprint"] else len(golden["per_episode"]["seed"]) // 2
     assert len(differ) <= allowed, (f"{name}: {len(differ)} of {len(golden['per_episode']['seed'])} episodes differ "
                                     f"from the golden run (at most {allowed} here): {differ}")

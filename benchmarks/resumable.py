@@ -1,0 +1,49 @@
+"""One step-budgeted training run that survives a stopped machine: the benchmarks' long runs.
+
+A benchmark that trains for hours (the budget curve, the chunk sweep on the arm pair, the pixel
+policy, a head the package does not ship) calls :func:`train_steps`. The run trains for exactly
+``steps`` optimiser steps into ``run`` (a folder in a cache, never the repository). Its resume state
+(:mod:`coursekit.train_state`) lives beside it as ``.<run name>.state.pt`` and is rewritten about
+every minute, so a killed run started again with the same arguments continues with the same bytes as
+an uninterrupted one; the state is removed once the checkpoint is written. A step budget rather
+than minutes keeps a result independent of what else shares the core.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def state_path(run: Path) -> Path:
+    """The resume state of ``run``: ``run.parent / ".<run.name>.state.pt"``."""
+    return run.parent / f".{run.name}.state.pt"
+
+
+def is_trained(run: Path) -> bool:
+    """True when ``run`` holds a finished checkpoint (its config written and no resume state left)."""
+    return (run / "config.json").is_file() and not state_path(run).is_file()
+
+
+def train_steps(policy, batches, recipe: dict, run: Path, steps: int, seed: int, threads: int = 1,
+                dataset_meta: dict | None = None, progress: bool = False):
+    """Train ``policy`` on ``batches`` for ``steps`` steps of ``recipe`` into ``run``; returns the trained policy.
+
+    ``recipe`` is a policy class's named recipe (``make_policy`` returns it); ``seed`` seeds the
+    batches and the run (the caller seeds the weights when it builds ``policy``); ``threads`` is
+    the torch thread count (one run per core). The returned policy carries the EMA weights, which
+    is what the checkpoint in ``run`` holds.
+    """
+    import torch
+
+    from coursekit.checkpoint import CheckpointSaver
+    from coursekit.train import TrainConfig, train
+
+    run.parent.mkdir(parents=True, exist_ok=True)
+    state = state_path(run)
+    torch.manual_seed(seed)
+    config = TrainConfig(**{**recipe, "max_steps": steps, "seed": seed, "num_threads": threads,
+                            "progress": progress, "checkpoint_every_minutes": None})
+    result = train(policy, batches, config, callbacks=[CheckpointSaver(run, dataset_meta=dataset_meta)],
+                   state_file=state)
+    state.unlink(missing_ok=True)
+    return result.policy
