@@ -1,6 +1,6 @@
 """Chapter 1's averaging failure, measured: one start, two routes, regression vs Diffusion Policy.
 
-    .venv/bin/python -m benchmarks.bench_two_route                       # 3 training seeds (about 10 min, 1 core)
+    .venv/bin/python -m benchmarks.bench_two_route                       # 3 training seeds x 200 starts (~1 h, 1 core)
     .venv/bin/python -m benchmarks.bench_two_route --steps 50 --rollouts 2 --no-record   # smoke
 
 Why this set-up: on the whole task each start is demonstrated once, so a chunked regressor can
@@ -13,14 +13,17 @@ planner's seeded coin), nothing else. On exactly these demonstrations, with one 
 ``--steps`` optimiser steps), train chunked regression and Diffusion Policy (DDIM-10) with each of
 ``--train-seeds`` and measure from ``TWO_WAY_START``:
 
-- the first chunk, regression's one and ``--samples`` DP chunks per training seed: which of three
-  reference paths it is nearest (RMS over its targets from the current step on): the mean first
-  chunk of the clockwise runs, of the anticlockwise runs, or of all runs, the path between the
-  two routes that MSE's optimum predicts (chapter 1, 5a). A turning-angle test does not work
-  here: a straight path through the T sweeps a large angle about its centre too;
-- ``--rollouts`` closed-loop episodes of 300 steps (DP: a different sampling stream for each;
-  regression is deterministic, so its episodes are identical): score (max coverage, the paper's
-  metric), success, and steps stalled against the T (``coursekit.evaluate.behaviour``).
+- from each of ``--rollouts`` starts near it (the pusher moved by up to ``--jitter`` px, block
+  untouched; the same starts, seeded, for every head and training seed): the first chunk (DP:
+  sampled, a different stream per start), and which of three reference paths it is nearest (RMS
+  over its targets from the current step on): the mean first chunk of the clockwise runs, of the
+  anticlockwise runs, or of all runs, the path between the two routes that MSE's optimum predicts
+  (chapter 1, 5a). A turning-angle test does not work here: a straight path through the T sweeps
+  a large angle about its centre too;
+- from the same starts, closed-loop episodes of 300 steps: score (max coverage, the paper's
+  metric), success, and steps stalled against the T (``coursekit.evaluate.behaviour``). The
+  jitter is what makes a deterministic regressor's rollouts more than one episode: from the
+  exact start all of them would be the same.
 
 Rows go to the section "Claims (PushT, two-route start)" with a t-interval over training seeds
 (scores) or a Wilson interval over the pooled first chunks (paths).
@@ -30,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 from pathlib import Path
 
 import gymnasium as gym
@@ -39,6 +43,8 @@ from benchmarks.protocol import t_estimate
 
 SECTION = "Claims (PushT, two-route start)"
 ROOT = Path(__file__).resolve().parent.parent
+CACHE = Path(os.environ.get("XDG_CACHE_HOME", "~/.cache")).expanduser() / "coursekit" / "two_route"
+"""The trained models and per-start results (outside the repository; an existing one is reused)."""
 PATHS = ("cw", "ccw", "between")
 HEADS = {"chunked regression": ("regression", {}), "DP DDIM-10": ("diffusion", {"sampler": "ddim", "num_inference_steps": 10})}
 """row label -> (policy type, sampling options)."""
@@ -65,15 +71,28 @@ def two_route_runs(runs_each: int) -> tuple[list, list[int]]:
     return [r for _, r in chosen], [c for c, _ in chosen]
 
 
-class ResetToStart(gym.Wrapper):
-    """PushT that always resets to one state (the evaluation's seeds only number the episodes)."""
+class ResetToStarts(gym.Wrapper):
+    """PushT that resets episode ``seed`` to ``starts[seed]`` (the evaluation's seeds index the starts)."""
 
-    def __init__(self, env: gym.Env, state) -> None:
+    def __init__(self, env: gym.Env, starts: np.ndarray) -> None:
         super().__init__(env)
-        self.state = [float(v) for v in state]  # (5,) [agent x, y, block x, y, angle]
+        self.starts = np.asarray(starts, dtype=float)  # (N, 5) [agent x, y, block x, y, angle]
 
     def reset(self, *, seed=None, options=None):
-        return self.env.reset(seed=seed, options={"reset_to_state": self.state})
+        return self.env.reset(seed=seed, options={"reset_to_state": self.starts[seed].tolist()})
+
+
+def jittered_starts(n: int, jitter: float, seed: int = 0) -> np.ndarray:
+    """(n, 5) states: TWO_WAY_START with the pusher moved uniformly within a disc of ``jitter`` px."""
+    from coursekit.experts.pusht_planner import TWO_WAY_START
+
+    rng = np.random.default_rng(seed)
+    radius = jitter * np.sqrt(rng.uniform(size=n))  # uniform over the disc's area
+    angle = rng.uniform(0.0, 2 * np.pi, size=n)
+    starts = np.tile(np.asarray(TWO_WAY_START, dtype=float), (n, 1))  # (n, 5)
+    starts[:, 0] += radius * np.cos(angle)
+    starts[:, 1] += radius * np.sin(angle)
+    return starts
 
 
 def reference_paths(runs: list, horizon: int) -> dict[str, np.ndarray]:
@@ -91,35 +110,40 @@ def nearest_path(chunks: np.ndarray, refs: dict[str, np.ndarray]) -> list[str]:
     return [names[i] for i in dist.argmin(1)]
 
 
-def measure(policy, sampling: dict, runs: list, n_samples: int, n_rollouts: int, seed: int) -> dict:
-    """First-chunk paths and closed-loop outcomes of ``policy`` from TWO_WAY_START (see module docstring)."""
+def first_chunks(policy, sampling: dict, starts: np.ndarray, seed: int) -> np.ndarray:
+    """(N, Tp - To + 1, 2): the first chunk from each start, from the current step on (DP: one sample each)."""
     import torch
 
     from coursekit.data.features import get_features
     from coursekit.envs.pusht import PushTEnv
+
+    env = PushTEnv(obs_type="state")
+    feats = []
+    for start in starts:
+        obs, _ = env.reset(options={"reset_to_state": start.tolist()})
+        feats.append(get_features(policy.config.features)(obs))  # (Do,)
+    to = policy.config.n_obs_steps
+    history = np.repeat(np.stack(feats)[:, None], to, axis=1)  # (N, To, Do): as at an episode's start
+    chunks = policy.predict_chunk(history, generator=torch.Generator().manual_seed(seed), **sampling)
+    return np.asarray(chunks)[:, to - 1:]
+
+
+def measure(policy, sampling: dict, runs: list, starts: np.ndarray, seed: int) -> dict:
+    """First-chunk paths and closed-loop outcomes of ``policy`` from each of ``starts`` (module docstring)."""
     from coursekit.evaluate.behaviour import stalled_steps
     from coursekit.evaluate.closed_loop import evaluate
     from coursekit.evaluate.tasks import RecordAdapter
-    from coursekit.experts.pusht_planner import TWO_WAY_START
     from coursekit.tasks import PUSHT
 
-    env = PushTEnv(obs_type="state")
-    obs, _ = env.reset(options={"reset_to_state": list(TWO_WAY_START)})
-    feats = get_features(policy.config.features)(obs)  # (Do,)
-    to = policy.config.n_obs_steps
-    history = np.repeat(feats[None, None], to, axis=1)  # (1, To, Do): as at an episode's start
-    n = n_samples if policy.policy_type == "diffusion" else 1  # regression is deterministic: one chunk says it all
-    chunks = np.asarray(policy.predict_chunk(np.repeat(history, n, axis=0), generator=torch.Generator().manual_seed(seed),
-                                             **sampling))[:, to - 1:]  # (n, Tp - To + 1, 2): from the current step on
+    chunks = first_chunks(policy, sampling, starts, seed)
     paths = nearest_path(chunks, reference_paths(runs, chunks.shape[1]))
 
-    class TwoRouteAdapter(RecordAdapter):  # PushT as usual, but every episode starts at TWO_WAY_START
+    class JitteredAdapter(RecordAdapter):  # PushT as usual, but episode i starts at starts[i]
         def make_env(self, max_steps: int):
-            return ResetToStart(super().make_env(max_steps), TWO_WAY_START)
+            return ResetToStarts(super().make_env(max_steps), starts)
 
-    adapter = TwoRouteAdapter(PUSHT, policy)
-    k = n_rollouts if policy.policy_type == "diffusion" else 1
-    r = evaluate(policy, adapter, seeds=list(range(k)), sampling=sampling, seed=seed, progress=False, record=True)
+    r = evaluate(policy, JitteredAdapter(PUSHT, policy), seeds=list(range(len(starts))), sampling=sampling, seed=seed,
+                 progress=False, record=True)
     stall = stalled_steps(r.states, r.length)
     return {"paths": paths, "max_reward": r.max_reward.tolist(), "success": r.success.tolist(),
             "stalled": stall.tolist(), "seconds": r.seconds}
@@ -131,24 +155,28 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--train-seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--steps", type=int, default=1500, help="optimiser steps per model")
     parser.add_argument("--down-dims", type=int, nargs="+", default=[32, 64, 128], help="U-Net widths (both heads)")
-    parser.add_argument("--samples", type=int, default=64, help="DP first chunks sampled per training seed")
-    parser.add_argument("--rollouts", type=int, default=16, help="DP closed-loop episodes per training seed")
-    parser.add_argument("--out", type=Path, default=ROOT / "outputs" / "bench_two_route", help="models and results")
+    parser.add_argument("--rollouts", type=int, default=200,
+                        help="starts near TWO_WAY_START per training seed: one first chunk and one episode each")
+    parser.add_argument("--jitter", type=float, default=5.0, help="px: the pusher's start lies within this of TWO_WAY_START's")
+    parser.add_argument("--out", type=Path, default=CACHE, help=f"models and results (default {CACHE})")
     parser.add_argument("--threads", type=int, default=1, help="torch threads")
     parser.add_argument("--no-record", action="store_true", help="print only, do not write results.json")
     args = parser.parse_args(argv)
-    for flag in ("runs_each", "steps", "samples", "rollouts", "threads"):
+    for flag in ("runs_each", "steps", "rollouts", "threads"):
         if getattr(args, flag) < 1:
             raise SystemExit(f"--{flag.replace('_', '-')} must be >= 1, got {getattr(args, flag)}")
+    if not 0.0 <= args.jitter <= 20.0:
+        raise SystemExit(f"--jitter must be in [0, 20] px (the start must stay the two-way one), got {args.jitter}")
     import torch
 
-    from coursekit.checkpoint import CheckpointSaver, load_checkpoint
+    from benchmarks.resumable import is_trained, train_steps
+    from coursekit.atomic import atomic_write_text
+    from coursekit.checkpoint import load_checkpoint
     from coursekit.data.episodes import EpisodeDataset
     from coursekit.nn.unet1d import UNet1DConfig
     from coursekit.policies import make_policy
     from coursekit.stats import rate_estimate
     from coursekit.tasks import PUSHT
-    from coursekit.train import TrainConfig, train
 
     torch.set_num_threads(args.threads)
     runs, coins = two_route_runs(args.runs_each)
@@ -160,34 +188,32 @@ def main(argv: list[str] | None = None) -> int:
     tag = f"runs{args.runs_each}_s{args.steps}_u{'-'.join(map(str, args.down_dims))}"
     cmd = (f".venv/bin/python -m benchmarks.bench_two_route --runs-each {args.runs_each} --steps {args.steps} "
            f"--down-dims {' '.join(map(str, args.down_dims))} --train-seeds {' '.join(map(str, args.train_seeds))} "
-           f"--samples {args.samples} --rollouts {args.rollouts} --threads {args.threads}")
+           f"--rollouts {args.rollouts} --jitter {args.jitter:g} --threads {args.threads}")
+    starts = jittered_starts(args.rollouts, args.jitter)
     results: dict[str, list[dict]] = {}
     for label, (kind, sampling) in HEADS.items():
         for ts in args.train_seeds:
             run = args.out / f"{kind}_{tag}_seed{ts}"
-            file = run / f"two_route_paths_samples{args.samples}_rollouts{args.rollouts}.json"
+            file = run / f"two_route_starts{args.rollouts}_jitter{args.jitter:g}.json"
             if file.exists():
                 results.setdefault(label, []).append(json.loads(file.read_text()))
                 continue
-            if (run / "config.json").exists():
+            if is_trained(run):
                 policy = load_checkpoint(run, device="cpu")
             else:
                 policy, batches, recipe = make_policy(kind, data, features="pusht_keypoints", recipe="cpu", seed=ts,
                                                       unet=UNet1DConfig(down_dims=tuple(args.down_dims)))
-                torch.manual_seed(ts)
-                policy = train(policy, batches, TrainConfig(**{**recipe, "max_steps": args.steps, "seed": ts,
-                                                               "num_threads": args.threads, "progress": False,
-                                                               "checkpoint_every_minutes": None}),
-                               callbacks=[CheckpointSaver(run, dataset_meta=data.meta)]).policy  # EMA, as saved
-            out = measure(policy, sampling, runs, args.samples, args.rollouts, seed=ts)
-            file.write_text(json.dumps(out) + "\n")
+                policy = train_steps(policy, batches, recipe, run, args.steps, ts, args.threads, data.meta)  # EMA
+            out = measure(policy, sampling, runs, starts, seed=ts)
+            atomic_write_text(file, json.dumps(out) + "\n")
             results.setdefault(label, []).append(out)
             print(f"{label}, training seed {ts}: first chunks {dict((s, out['paths'].count(s)) for s in PATHS)}"
                   f"; score {np.mean(out['max_reward']):.3f}, stalled {np.mean(out['stalled']):.1f} steps", flush=True)
 
     k = len(args.train_seeds)
-    where = f"TWO_WAY_START; training seeds {args.train_seeds[0]}-{args.train_seeds[-1]}"
-    conditions = (f"{len(runs)} expert runs from TWO_WAY_START ({args.runs_each} cw + {args.runs_each} ccw) and "
+    where = f"{args.rollouts} starts within {args.jitter:g} px of TWO_WAY_START; training seeds {args.train_seeds[0]}-{args.train_seeds[-1]}"
+    conditions = (f"{args.rollouts} starts (pusher within {args.jitter:g} px of TWO_WAY_START's, block as there) per "
+                  f"training seed; trained on {len(runs)} expert runs from TWO_WAY_START ({args.runs_each} cw + {args.runs_each} ccw) and "
                   f"nothing else; U-Net {args.down_dims}, To=2, Tp=16, Ta=8, keypoints, recipe cpu, {args.steps} "
                   f"steps; {k} training seed(s) {args.train_seeds}")
 
@@ -203,16 +229,17 @@ def main(argv: list[str] | None = None) -> int:
     for label, outs in results.items():
         paths = np.array([s for o in outs for s in o["paths"]])
         est = rate_estimate(paths == "between")
-        per_chunk = "one deterministic chunk" if label == "chunked regression" else f"{args.samples} sampled chunks"
+        per_chunk = "its deterministic chunk" if label == "chunked regression" else "one sampled chunk"
         rec(f"{label}: first chunk nearest the path between the routes", est.value, est.lo, est.hi, est.n,
-            f"share of first chunks ({per_chunk} per training seed, pooled; Wilson interval) nearer the mean of all "
+            f"share of first chunks ({per_chunk} per start, pooled over starts and training seeds; Wilson interval) "
+            f"nearer the mean of all "
             f"expert first chunks than the mean cw one ({np.mean(paths == 'cw'):.2f}) or the mean ccw one "
             f"({np.mean(paths == 'ccw'):.2f}); {conditions}")
         for figure, key, scale in (("score", "max_reward", 1.0), ("steps stalled against the T", "stalled", 1.0)):
             per_seed = [float(np.mean(o[key])) * scale for o in outs]
             mean, lo, hi = t_estimate(per_seed)
             lo, hi = max(0.0, lo), (min(1.0, hi) if figure == "score" else hi)  # neither can be negative
-            rec(f"{label}: {figure} from TWO_WAY_START", mean, lo, hi, sum(len(o[key]) for o in outs),
+            rec(f"{label}: {figure} from starts near TWO_WAY_START", mean, lo, hi, sum(len(o[key]) for o in outs),
                 f"mean over training seeds (per seed: {', '.join(f'{v:.3f}' for v in per_seed)}), each the mean of "
                 f"{len(outs[0][key])} episode(s) of 300 steps; 95 % t-interval over training seeds; {conditions}")
     return 0
