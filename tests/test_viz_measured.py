@@ -9,7 +9,7 @@ import pytest
 
 matplotlib.use("Agg")
 
-from coursekit.viz.measured import budget_curve, chunk_sweep, load_rows, plot_points  # noqa: E402
+from coursekit.viz.measured import SHIPPED_ROWS, budget_curve, chunk_sweep, load_rows, plot_points, side_by_side  # noqa: E402
 
 
 def row(section, name, value, interval=None, n=None, unit=""):
@@ -61,3 +61,25 @@ def test_plot_points_draws_the_interval_and_names_a_thin_n():
     assert list(lo) == [0.4, 0.55] and list(hi) == [0.7, 0.65]
     assert ax.get_legend_handles_labels()[1] == ["x (n = 50-50 on some points)"]
     plt.close(fig)
+
+
+def test_side_by_side_reads_each_shipped_row_as_a_fraction_and_skips_missing_ones():
+    pusht, cube = list(SHIPPED_ROWS)[:2]
+    dp_key, cube_key = SHIPPED_ROWS[pusht][0][1], SHIPPED_ROWS[cube][1][1]
+    rows = {dp_key: row("Diffusion Policy", "x", 0.945, [0.912, 0.974], 200),
+            cube_key: row("ACT", "y", 96.5, [93.0, 98.3], 200, "%")}
+    got = side_by_side(rows)
+    assert got[pusht] == [("Diffusion Policy, DDIM-10", 0.945, 0.912, 0.974, 200)]
+    head, value, lo, hi, n = got[cube][0]
+    assert head == "ACT, ensembling" and n == 200
+    assert (value, lo, hi) == pytest.approx((0.965, 0.93, 0.983))
+    assert side_by_side({}) == {}
+
+
+def test_every_shipped_row_the_figure_names_is_in_the_table():
+    from pathlib import Path
+
+    table = load_rows(path=Path(__file__).resolve().parent.parent / "benchmarks" / "results.json")
+    missing = [key for heads in SHIPPED_ROWS.values() for _, key in heads if key not in table]
+    assert not missing, f"chapter 9's figure names rows the table lacks: {missing}"
+    assert all(table[key]["n"] >= 200 and table[key]["interval"] for heads in SHIPPED_ROWS.values() for _, key in heads)

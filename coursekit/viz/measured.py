@@ -9,6 +9,7 @@ readers return nothing and the figures say where the rows come from.
     load_rows(section)        {key: row} of one section (all sections when None)
     budget_curve(rows)        variant -> [(steps, value, lo, hi, n)]   (bench_chunk_ablation)
     chunk_sweep(rows)         executor -> [(k, value, lo, hi, n)], and the no-CVAE rows (bench_act_chunks)
+    side_by_side(rows)        task -> [(head, value, lo, hi, n)]: the shipped checkpoints (chapter 9)
     plot_points(ax, pts, ...) one series with its interval bars
 """
 
@@ -68,6 +69,40 @@ def chunk_sweep(rows: dict[str, dict[str, Any]]) -> tuple[dict[str, list[Point]]
             else:
                 sweep.setdefault(m["executor"], []).append(point)
     return {e: sorted(p) for e, p in sorted(sweep.items())}, no_vae
+
+
+SHIPPED_ROWS = {  # task -> [(head label, row key)]: every shipped checkpoint's protocol row (200 episodes)
+    "PushT (score: mean max coverage)": [
+        ("Diffusion Policy, DDIM-10", "Diffusion Policy/shipped checkpoint score, DDIM-10 (notebook 05)"),
+        ("flow matching, Euler-10", "Flow matching/shipped flow checkpoint score, Euler-10 (notebook 10)"),
+        ("chunked regression", "Diffusion Policy/shipped regression checkpoint score (notebook 05)"),
+        ("ACT, ensembling", "ACT/ACT PushT score (mean of max coverage)"),
+    ],
+    "transfer cube (strict success)": [
+        ("Diffusion Policy, DDIM-10", "ACT/DP transfer cube success (strict, DDIM-10, Ta=8)"),
+        ("ACT, ensembling", "ACT/ACT transfer cube strict success, shipped checkpoint, temporal ensembling m=0.01"),
+        ("ACT, open-loop chunks", "ACT/ACT transfer cube strict success, shipped checkpoint, open-loop chunks (Ta=k=100)"),
+    ],
+    "insertion (strict success)": [
+        ("ACT, ensembling", "ACT/ACT insertion strict success, shipped checkpoint, temporal ensembling m=0.01"),
+        ("ACT, open-loop chunks", "ACT/ACT insertion strict success, shipped checkpoint, open-loop chunks (Ta=k=100)"),
+    ],
+}
+"""The chapter-9 comparison: which row scores each shipped head on each task."""
+
+
+def side_by_side(rows: dict[str, dict[str, Any]]) -> dict[str, list[tuple]]:
+    """task -> [(head, value, lo, hi, n)] of the shipped checkpoints, as fractions (rows in % are divided by 100).
+
+    A row missing from ``rows`` is left out (a pip-installed package has no table: every task is empty).
+    """
+    out: dict[str, list[tuple]] = {}
+    for task, heads in SHIPPED_ROWS.items():
+        for head, key in heads:
+            if key in rows:
+                row = rows[key]
+                out.setdefault(task, []).append((head, *_point(0, row, 0.01 if row.get("unit") == "%" else 1.0)[1:]))
+    return out
 
 
 def plot_points(ax: Any, points: list[Point], label: str, **style: Any) -> None:
