@@ -190,8 +190,9 @@ def training_arrays(dataset: Any, features: str, image_size: tuple[int, int] = (
     if spec.obs_type != "image":
         return {"obs": spec(dataset.arrays)}, action
     if "image" in dataset.arrays:
-        images = np.asarray(dataset["image"])
-        images = images.transpose(0, 3, 1, 2) if images.shape[-1] == 3 else images  # (N, 3, H, W)
+        from coursekit.data.frames import frames_chw
+
+        images = frames_chw(dataset["image"], tuple(image_size), "the data set's 'image' frames")  # (N, 3, H, W)
     else:
         from coursekit.envs.pusht_render import PushTRenderer
 

@@ -58,8 +58,10 @@ class RecordAdapter:
             from coursekit.data.features import env_obs_features
 
             return env_obs_features(self.features, observations)  # (B, Do)
+        from coursekit.data.frames import frames_chw
+
         pixels = np.stack([o["pixels"] for o in observations])  # (B, H, W, 3) uint8
-        return {"image": pixels.transpose(0, 3, 1, 2),  # (B, 3, H, W)
+        return {"image": frames_chw(pixels, self.image_size, "the environment's camera frames"),  # (B, 3, H, W)
                 "agent_pos": np.stack([o["agent_pos"] for o in observations]).astype(np.float32)}  # (B, 2)
 
     def state_fn(self, env: Any) -> np.ndarray:

@@ -154,8 +154,17 @@ class UNetChunkPolicy(ChunkPolicy):
             img = out["image"]
             want = (c.n_obs_steps, c.vision.in_channels, *c.vision.input_size)
             if img.ndim != 5 or tuple(img.shape[1:]) != want or img.shape[0] != low.shape[0]:
+                hint = " (channels last? frames go channels first)" if img.shape[-1] == c.vision.in_channels else ""
                 raise ValueError(f"observation 'image' must have shape (B, {', '.join(map(str, want))}) "
-                                 f"(uint8 0..255 or float in [0, 1]), got {tuple(img.shape)}")
+                                 f"(uint8 0..255 or float in [0, 1]), got {tuple(img.shape)}{hint}")
+            if img.dtype != torch.uint8:  # floats must be [0, 1]: 0..255 floats would saturate, ints are ambiguous
+                if not torch.as_tensor(obs_history["image"]).is_floating_point():
+                    raise ValueError(f"observation 'image' must be uint8 0..255 or float in [0, 1], got "
+                                     f"{torch.as_tensor(obs_history['image']).dtype}")
+                lo, hi = float(img.min()), float(img.max())
+                if lo < 0.0 or hi > 1.0:
+                    raise ValueError(f"observation 'image' as float must lie in [0, 1], got values in [{lo:g}, {hi:g}] "
+                                     f"(0..255 frames: pass them as uint8)")
         return out, unbatched
 
     def encode_obs(self, obs: Mapping[str, torch.Tensor]) -> torch.Tensor:
