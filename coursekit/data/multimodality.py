@@ -124,32 +124,48 @@ def is_two_way(vectors: np.ndarray, config: MultimodalityConfig) -> bool:
     return other >= max(2, math.ceil(config.min_fraction * len(moving)))
 
 
+class Neighbourhoods:
+    """A PushT data set in the definition's terms (steps 1-3), ready to answer queries about its rows."""
+
+    def __init__(self, dataset, config: MultimodalityConfig | None = None) -> None:
+        from scipy.spatial import cKDTree
+
+        self.config = config or MultimodalityConfig()
+        state, action = np.asarray(dataset["state"], float), np.asarray(dataset["action"], float)
+        if state.ndim != 2 or state.shape[1] != 5 or action.shape != (len(state), 2):
+            raise ValueError(f"expected PushT arrays state (N, 5) and action (N, 2), got {state.shape} and {action.shape}")
+        ends = np.asarray(dataset.episode_ends)
+        self.episode = np.repeat(np.arange(len(ends)), np.diff(np.concatenate([[0], ends])))  # (N,)
+        self.z = state_features(state, np.concatenate([[0], ends[:-1]]), self.config)  # (N, 8)
+        self.v = headings(state, action, ends, self.config.horizon)  # (N, 2)
+        self.phase = np.asarray(dataset["phase"])  # (N,)
+        self.tree = cKDTree(self.z)
+
+    def neighbours(self, row: int) -> np.ndarray:
+        """(K,) rows of step 2: the nearest row of each demonstration within ``radius`` of ``row``."""
+        near = np.asarray(self.tree.query_ball_point(self.z[row], self.config.radius), dtype=np.int64)
+        order = near[np.argsort(np.linalg.norm(self.z[near] - self.z[row], axis=1), kind="stable")]
+        _, first = np.unique(self.episode[order], return_index=True)
+        return order[first]  # by demonstration (step 4's tie-break between equal modes depends on this order)
+
+    def verdict(self, row: int) -> int:
+        """1 two-way, 0 one-way, -1 unsupported (fewer than ``min_episodes`` demonstrations near)."""
+        rows = self.neighbours(row)
+        if len(rows) < self.config.min_episodes:
+            return -1
+        return int(is_two_way(self.v[rows], self.config))
+
+
 def two_way_fraction(dataset, config: MultimodalityConfig | None = None, seed: int = 0,
                      n_boot: int = 1000) -> Multimodality:
     """The two-way fraction of a PushT ``dataset`` (``EpisodeDataset`` with "state" (N, 5),
     "action" (N, 2), "phase" (N,)), on ``config.n_queries`` rows drawn with ``seed``."""
-    from scipy.spatial import cKDTree
-
-    config = config or MultimodalityConfig()
-    state, action = np.asarray(dataset["state"], float), np.asarray(dataset["action"], float)
-    if state.ndim != 2 or state.shape[1] != 5 or action.shape != (len(state), 2):
-        raise ValueError(f"expected PushT arrays state (N, 5) and action (N, 2), got {state.shape} and {action.shape}")
-    ends = np.asarray(dataset.episode_ends)
-    episode = np.repeat(np.arange(len(ends)), np.diff(np.concatenate([[0], ends])))  # (N,)
-    z = state_features(state, np.concatenate([[0], ends[:-1]]), config)  # (N, 8)
-    v = headings(state, action, ends, config.horizon)  # (N, 2)
-    candidates = np.flatnonzero(np.isin(np.asarray(dataset["phase"]), PUSHER_PHASES))
+    hood = Neighbourhoods(dataset, config)
+    candidates = np.flatnonzero(np.isin(hood.phase, PUSHER_PHASES))
     rng = np.random.default_rng(seed)
-    rows = np.sort(rng.choice(candidates, size=min(config.n_queries, len(candidates)), replace=False))
-    tree = cKDTree(z)
-    verdict = np.full(len(rows), -1, dtype=np.int8)
-    for q, row in enumerate(rows):
-        near = np.asarray(tree.query_ball_point(z[row], config.radius), dtype=np.int64)
-        order = near[np.argsort(np.linalg.norm(z[near] - z[row], axis=1), kind="stable")]
-        _, first = np.unique(episode[order], return_index=True)  # the nearest row of each episode
-        if len(first) >= config.min_episodes:
-            verdict[q] = int(is_two_way(v[order[first]], config))
-    return _summarise(verdict, rows, episode, rng, n_boot)
+    rows = np.sort(rng.choice(candidates, size=min(hood.config.n_queries, len(candidates)), replace=False))
+    verdict = np.array([hood.verdict(int(row)) for row in rows], dtype=np.int8)  # (Q,)
+    return _summarise(verdict, rows, hood.episode, rng, n_boot)
 
 
 def _summarise(verdict: np.ndarray, rows: np.ndarray, episode: np.ndarray, rng: np.random.Generator,
