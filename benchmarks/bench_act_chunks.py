@@ -27,13 +27,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import re
 from pathlib import Path
 
 import numpy as np
 
 from benchmarks.protocol import add_protocol_args, protocol_seeds, t_estimate
+from benchmarks.resumable import cache_dir
 from coursekit.atomic import atomic_write_text
 
 SECTION = "Chunk ablation (arm pair)"
@@ -51,7 +51,7 @@ BLOCK = 50
 """Seeds per cached evaluation block (the unit an interrupted evaluation resumes from)."""
 EPISODE_STEPS: int | None = None
 """Control steps per evaluation episode: None is the protocol's (8 s); tests shorten it."""
-CACHE = Path(os.environ.get("XDG_CACHE_HOME", "~/.cache")).expanduser() / "coursekit" / "act_chunks"
+CACHE = cache_dir("act_chunks")
 
 
 def demonstrations(out: Path):

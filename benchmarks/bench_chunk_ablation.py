@@ -32,20 +32,20 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import re
 from pathlib import Path
 
 import numpy as np
 
 from benchmarks.protocol import add_protocol_args, protocol_seeds, t_estimate
+from benchmarks.resumable import cache_dir
 from coursekit.atomic import atomic_write_text
 
 SECTION = "Chunk ablation (PushT)"
 ROOT = Path(__file__).resolve().parent.parent
 DATA = ROOT / "outputs" / "data" / "pusht_400ep_seed0_noise0-5.npz"
 """What ``coursekit collect pusht --episodes 400 --seed 0 --action-noise 0,5`` writes: the shipped models' data."""
-CACHE = Path(os.environ.get("XDG_CACHE_HOME", "~/.cache")).expanduser() / "coursekit" / "chunk_ablation"
+CACHE = cache_dir("chunk_ablation")
 """Where the trained runs and their evaluations live (outside the repository; resumable)."""
 VARIANTS = {
     "single-step regression (To=1, Tp=Ta=1)": ("regression", {"n_obs_steps": 1, "horizon": 1, "n_action_steps": 1,

@@ -14,14 +14,14 @@ bootstrap over demonstrations (95 %); n is the number of supported query states.
 from __future__ import annotations
 
 import argparse
-import os
 from pathlib import Path
 
+from benchmarks.resumable import cache_dir
+
 SECTION = "Multimodality of the demonstrations (PushT)"
-CACHE = Path(os.environ.get("COURSEKIT_BENCH_CACHE", Path.home() / ".cache" / "coursekit-bench"))
-"""Data sets and runs of the long benchmarks live outside the repository (they outlast a work tree)."""
-DEFAULT_DATA = (CACHE / "data" / "pusht_400ep_seed0_noise0-5.npz",
-                CACHE / "data" / "pusht_400ep_seed0_noise0-5_person.npz")
+DATA_DIR = cache_dir("data")
+"""The data sets the long benchmarks share live outside the repository (they outlast a work tree)."""
+DEFAULT_DATA = (DATA_DIR / "pusht_400ep_seed0_noise0-5.npz", DATA_DIR / "pusht_400ep_seed0_noise0-5_person.npz")
 COLLECT = {"pusht_400ep_seed0_noise0-5.npz": "coursekit collect pusht --episodes 400 --seed 0 --action-noise 0,5",
            "pusht_400ep_seed0_noise0-5_person.npz":
                "coursekit collect pusht --episodes 400 --seed 0 --action-noise 0,5 --style person"}
@@ -58,7 +58,7 @@ def main(argv: list[str] | None = None) -> int:
         if not args.no_record:
             from benchmarks.results import record
 
-            shown = f"~/.cache/coursekit-bench/data/{path.name}" if path.parent == CACHE / "data" else str(path)
+            shown = f"~/.cache/coursekit/data/{path.name}" if path.parent == DATA_DIR else str(path)
             command = f".venv/bin/python -m benchmarks.bench_multimodality --data {shown} --queries {args.queries}"
             record(SECTION, name, m.fraction, "", command, note=note, interval=(m.lo, m.hi), n=m.n_supported)
     return 0

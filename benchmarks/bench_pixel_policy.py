@@ -38,10 +38,11 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.bench_chunk_ablation import DATA
+from benchmarks.resumable import cache_dir
 
 SECTION = "Pixels (PushT): two-stage route"
 COMMAND = ".venv/bin/python -m benchmarks.bench_pixel_policy"
-CACHE = Path(os.environ.get("XDG_CACHE_HOME", "~/.cache")).expanduser() / "coursekit" / "pixels"
+CACHE = cache_dir("pixels")
 HELD_OUT = 40
 """The last episodes of the data set, never trained on by stage 1 (its keypoint error is measured there)."""
 

@@ -33,17 +33,17 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 
 from benchmarks.protocol import t_estimate
+from benchmarks.resumable import cache_dir
 
 SECTION = "Claims (PushT, two-route start)"
 ROOT = Path(__file__).resolve().parent.parent
-CACHE = Path(os.environ.get("XDG_CACHE_HOME", "~/.cache")).expanduser() / "coursekit" / "two_route"
+CACHE = cache_dir("two_route")
 """The trained models and per-start results (outside the repository; an existing one is reused)."""
 PATHS = ("cw", "ccw", "between")
 HEADS = {"chunked regression": ("regression", {}), "DP DDIM-10": ("diffusion", {"sampler": "ddim", "num_inference_steps": 10})}

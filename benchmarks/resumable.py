@@ -11,7 +11,16 @@ than minutes keeps a result independent of what else shares the core.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
+
+CACHE_ROOT = Path(os.environ.get("XDG_CACHE_HOME", "~/.cache")).expanduser() / "coursekit"
+"""Where the long benchmarks keep their runs, evaluations and data sets: never the repository."""
+
+
+def cache_dir(name: str) -> Path:
+    """``CACHE_ROOT / name`` (not created): one benchmark's runs, or ``data`` for the data sets they share."""
+    return CACHE_ROOT / name
 
 
 def state_path(run: Path) -> Path:

@@ -17,12 +17,12 @@ head is never overwritten (delete it first).
 from __future__ import annotations
 
 import argparse
-import os
 from pathlib import Path
 
 from benchmarks.bench_chunk_ablation import DATA
+from benchmarks.resumable import cache_dir
 
-TRAINED_HEADS = Path(os.environ.get("XDG_CACHE_HOME", "~/.cache")).expanduser() / "coursekit" / "heads"
+TRAINED_HEADS = cache_dir("heads")
 """Where heads that are not shipped live (bench_latency and bench_rtc_regime look here)."""
 HEADS = {  # name -> folder, policy type, config fields, step budget (the shipped head's total), seed
     "flow-tp32": {"dir": "pusht_flow_state_tp32", "policy": "flow", "fields": {"horizon": 32}, "steps": 19259,
