@@ -126,3 +126,16 @@ def test_two_route_reference_paths_and_nearest():
     assert np.allclose(refs["between"], (up + down) / 2)  # the straight line between them
     chunks = np.stack([up + 3.0, down - 3.0, (up + down) / 2 + 1.0])  # (3, 5, 2)
     assert nearest_path(chunks, refs) == ["cw", "ccw", "between"]
+
+
+def test_two_route_starts_move_only_the_pusher_within_the_jitter_and_are_seeded():
+    from benchmarks.bench_two_route import jittered_starts
+    from coursekit.experts.pusht_planner import TWO_WAY_START
+
+    starts = jittered_starts(500, 5.0)  # (500, 5)
+    assert starts.shape == (500, 5)
+    offset = np.linalg.norm(starts[:, :2] - np.asarray(TWO_WAY_START[:2]), axis=1)  # (500,)
+    assert offset.max() <= 5.0 and offset.min() < 0.5 and np.median(offset) > 3.0  # uniform over the disc's area
+    np.testing.assert_array_equal(starts[:, 2:], np.tile(TWO_WAY_START[2:], (500, 1)))  # the block as at the tie
+    np.testing.assert_array_equal(starts, jittered_starts(500, 5.0))
+    np.testing.assert_array_equal(jittered_starts(3, 0.0), np.tile(TWO_WAY_START, (3, 1)))
