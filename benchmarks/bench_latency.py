@@ -22,7 +22,9 @@ for the seeds actually evaluated, with n and the seed range in the row. Run a su
 Heads: dp (shipped PushT DP, its DDIM-10), dp-ddpm (the same with DDPM-100), flow (the shipped
 PushT flow policy, Euler-10, if present), act (ACT on PushT), act-cube (ACT, transfer cube),
 dp-cube (DP, transfer cube), flow-tp32 (a flow head with a longer horizon, Tp = 32, trained like the
-shipped one: not shipped; trained by ``benchmarks/train_head.py`` into its ``TRAINED_HEADS``).
+shipped one: not shipped; trained by ``benchmarks/train_head.py`` into its ``TRAINED_HEADS``),
+dp-pixels (chapter 12's pixel policy: two 96x96 frames + the pusher position; until its checkpoint
+exists the latency part times its architecture with fresh weights).
 RTC needs a diffusion or flow head and is skipped for ACT.
 """
 
@@ -52,7 +54,11 @@ HEADS = {  # name -> (checkpoint dir, task, sampling options, label)
     "act-cube": ("act_transfer_cube", "transfer_cube", {}, "transfer cube ACT"),
     "dp-cube": ("dp_transfer_cube", "transfer_cube", {}, "transfer cube DP DDIM-10"),
     "flow-tp32": ("pusht_flow_state_tp32", "pusht", {}, "PushT flow Euler-10 (Tp = 32)"),
+    "dp-pixels": ("pusht_diffusion_pixels", "pusht", {}, "PushT pixel DP DDIM-10 (two 96x96 frames at 48x48)"),
 }
+UNTRAINED_FOR_LATENCY = ("dp-pixels",)
+"""Heads whose latency part may time their architecture with fresh weights until a checkpoint exists:
+how long a chunk takes does not depend on the weights (chapter 12's pixel policy, issue of its shipping)."""
 DELAYS = (0, 1, 2, 4, 8)
 STRATEGY_NAMES = tuple(STRATEGIES)  # sync, async, ensemble, rtc
 
@@ -84,11 +90,29 @@ def load_head(name: str):
     return load_checkpoint(path, device="cpu")
 
 
+def pixel_architecture():
+    """benchmarks/bench_pixel_policy's image DP (its "small" encoder, the default U-Net) with fresh weights."""
+    import torch
+
+    from benchmarks.bench_pixel_policy import encoder_config
+    from coursekit.data import MinMaxNormalizer
+    from coursekit.policies.diffusion import DiffusionPolicy, DiffusionPolicyConfig
+
+    torch.manual_seed(0)
+    policy = DiffusionPolicy(DiffusionPolicyConfig(obs_type="image", features="pusht_image", obs_dim=2,
+                                                   vision=encoder_config()))
+    arena = MinMaxNormalizer(np.zeros(2), np.full(2, 512.0))  # PushT's 512 px arena, for agent_pos and targets
+    policy.set_normalizers({"agent_pos": arena, "action": arena})
+    return policy
+
+
 def part_latency(args: argparse.Namespace) -> None:
     from coursekit.evaluate.latency import chunk_latency_ms, latency_delay
 
     for name in args.heads:
-        policy = load_head(name)
+        policy, weights = load_head(name), ""
+        if policy is None and name in UNTRAINED_FOR_LATENCY:
+            policy, weights = pixel_architecture(), "its architecture with fresh weights (no checkpoint yet: the time per chunk does not depend on the weights); "
         if policy is None:
             print(missing_head(name))
             continue
@@ -97,7 +121,7 @@ def part_latency(args: argparse.Namespace) -> None:
         spec = policy.execution_spec()
         per_action = ms / (1 if spec.temporal_ensembling else spec.n_action_steps)
         d10, d50 = latency_delay(ms, "pusht"), latency_delay(ms, "transfer_cube")
-        note = (f"batch 1, median of {args.repeats} after a warm-up, torch threads {_threads()}, 1-min load "
+        note = (f"{weights}batch 1, median of {args.repeats} after a warm-up, torch threads {_threads()}, 1-min load "
                 f"average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; d = ceil(latency x rate): "
                 f"{d10} at 10 Hz (PushT), {d50} at 50 Hz (arm pair)")
         print(f"{label}: {ms:.1f} ms per chunk, {per_action:.2f} ms per action, d = {d10} at 10 Hz, {d50} at 50 Hz")
