@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 import torch
 from torch import nn
@@ -89,3 +90,22 @@ def test_bad_input_raises():
         VisionEncoderConfig(crop_size=(100, 100))
     with pytest.raises(ValueError, match="group_size"):
         VisionEncoderConfig(widths=(24, 32))
+
+
+def test_keypoints_in_frame_maps_the_last_map_back_to_frame_pixels():
+    """keypoints_in_frame: [-1, 1] over the last map's cell centres -> crop -> resize -> frame pixels (closed form)."""
+    fixed = torch.tensor([[-1.0, -1.0], [0.0, 0.0], [1.0, 1.0]])  # (K, 2): first cell, centre, last cell
+
+    def keypoints_fn(maps):  # (B, K, H, W) -> (B, K, 2), whatever the maps hold
+        return fixed.expand(maps.shape[0], -1, -1) + 0 * maps.mean((2, 3))[..., None]
+
+    cfg = VisionEncoderConfig.preset("small")  # 96x96 frames, encoded at 48x48, 42x42 centre crop
+    cfg = VisionEncoderConfig(**{**cfg.__dict__, "num_keypoints": 3})
+    enc = VisionEncoder(cfg, keypoints_fn=keypoints_fn)
+    w = enc.stages(enc.stem(torch.zeros(1, 3, 42, 42))).shape[-1]  # the last map's width (2 here)
+    got = enc.keypoints_in_frame(torch.zeros(2, 3, 96, 96))  # (2, 3, 2)
+    assert got.shape == (2, 3, 2) and enc.training  # the mode is restored
+    off, scale, cell = (48 - 42) // 2, 96 / 48, 42 / w
+    np.testing.assert_allclose(got[0, 1].numpy(), [48.0, 48.0], atol=1e-5)  # the centre of a centred crop
+    np.testing.assert_allclose(got[0, 0].numpy(), [(0.5 * cell + off) * scale] * 2, atol=1e-5)
+    np.testing.assert_allclose(got[0, 2].numpy(), [((w - 0.5) * cell + off) * scale] * 2, atol=1e-5)

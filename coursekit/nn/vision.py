@@ -220,7 +220,8 @@ class VisionEncoder(nn.Module):
         self.pool = SpatialSoftmax(cin, cfg.num_keypoints, keypoints_fn)
         self.out = nn.Linear(2 * cfg.num_keypoints, cfg.feature_dim)
 
-    def forward(self, images: torch.Tensor, generator: torch.Generator | None = None) -> torch.Tensor:
+    def _keypoints(self, images: torch.Tensor, generator: torch.Generator | None = None):
+        """Images (B, C, *input_size) in [-1, 1] -> (keypoints (B, K, 2) in [-1, 1] of the last map, its (h', w'))."""
         cfg = self.config
         if images.ndim != 4 or images.shape[1] != cfg.in_channels or tuple(images.shape[-2:]) != cfg.input_size:
             raise ValueError(f"images must be (B, {cfg.in_channels}, {cfg.input_size[0]}, {cfg.input_size[1]}), "
@@ -231,5 +232,29 @@ class VisionEncoder(nn.Module):
             images = random_crop(images, cfg.crop_size, generator) if self.training \
                 else center_crop(images, cfg.crop_size)  # (B, C, h, w)
         x = self.stages(self.stem(images))  # (B, widths[-1], h', w')
-        keypoints = self.pool(x)  # (B, K, 2)
+        return self.pool(x), tuple(x.shape[-2:])
+
+    def forward(self, images: torch.Tensor, generator: torch.Generator | None = None) -> torch.Tensor:
+        keypoints, _ = self._keypoints(images, generator)  # (B, K, 2)
         return F.relu(self.out(keypoints.flatten(1)))  # (B, feature_dim)
+
+    @torch.no_grad()
+    def keypoints_in_frame(self, images: torch.Tensor) -> torch.Tensor:
+        """Where the encoder looks: its K spatial-softmax keypoints as (x, y) pixels of the input frames.
+
+        ``images``: (B, C, *input_size) in [-1, 1]. Returns (B, K, 2) in continuous pixel coordinates
+        of those frames (pixel i spans [i, i + 1]: draw over ``imshow(..., extent=(0, W, H, 0))``),
+        from the centre crop of eval mode. A keypoint is the expected position of a heat map over
+        the last feature map's cells; each cell is mapped to the centre of the crop pixels it covers.
+        """
+        cfg = self.config
+        was_training = self.training
+        self.eval()
+        try:
+            kp, (h, w) = self._keypoints(images)  # (B, K, 2) in [-1, 1], x first
+        finally:
+            self.train(was_training)
+        (ch, cw), (ih, iw), (fh, fw) = cfg.crop_size, cfg.image_size, cfg.input_size
+        x = ((kp[..., 0] + 1) / 2 * (w - 1) + 0.5) * cw / w + (iw - cw) // 2  # (B, K) image px
+        y = ((kp[..., 1] + 1) / 2 * (h - 1) + 0.5) * ch / h + (ih - ch) // 2  # (B, K)
+        return torch.stack([x * fw / iw, y * fh / ih], dim=-1)  # (B, K, 2) frame px
