@@ -114,7 +114,8 @@ def train_or_load(name: str, ts: int, args, dataset):
 
     kind, fields, _ = VARIANTS[name]
     slug = re.sub(r"[^a-z0-9]+", "-", name.lower()).strip("-")
-    run = args.out / f"{slug}_seed{ts}_s{args.steps}"
+    data = "" if args.data.name == DATA.name else f"_{args.data.stem}"  # runs on other demonstrations never mix
+    run = args.out / f"{slug}_seed{ts}_s{args.steps}{data}"
     if is_trained(run):
         return load_checkpoint(run, device="cpu"), run
     cfg = dict(fields)
@@ -122,6 +123,12 @@ def train_or_load(name: str, ts: int, args, dataset):
         cfg["unet"] = UNet1DConfig(**cfg["unet"])
     policy, batches, recipe = make_policy(kind, dataset, features="pusht_keypoints", recipe="cpu", seed=ts, **cfg)
     return train_steps(policy, batches, recipe, run, args.steps, ts, args.threads, dataset.meta), run
+
+
+def data_label(meta: dict) -> str:
+    """What the row names add for the demonstrations: nothing for the scripted planner's, else their style."""
+    style = meta.get("expert_style")
+    return "" if not style else ", person-like demonstrations"
 
 
 def part_train(args, seeds: list[int], rec) -> None:
@@ -135,6 +142,7 @@ def part_train(args, seeds: list[int], rec) -> None:
     conditions = (f"{args.data.name}, pusht_keypoints, recipe cpu, budget "
                   f"{args.steps} steps, {args.threads} thread(s)")
     budget = f", {args.steps} steps" if args.name_budget else ""  # the budget curve's rows
+    budget += data_label(dataset.meta)  # rows on other demonstrations are other rows
     rewards: dict[str, np.ndarray] = {}  # variant -> (training seeds, n) max reward
     for name, (_, _, sampling) in VARIANTS.items():
         if args.variants and not any(v in name for v in args.variants):
