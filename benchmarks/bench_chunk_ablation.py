@@ -105,6 +105,16 @@ def part_ta(args, seeds: list[int], rec) -> None:
             f"training seed; {saved['seconds']:.0f} s to evaluate")
 
 
+def run_dir(out: Path, name: str, ts: int, steps: int, data: Path) -> Path:
+    """The cache folder of variant ``name``, training seed ``ts``, ``steps`` on the demonstrations ``data``.
+
+    Runs on the shipped models' demonstrations (a file named like :data:`DATA`) keep the plain name;
+    runs on any other data set carry its file stem, so two data sets never share a run."""
+    slug = re.sub(r"[^a-z0-9]+", "-", name.lower()).strip("-")
+    tag = "" if data.name == DATA.name else f"_{data.stem}"
+    return out / f"{slug}_seed{ts}_s{steps}{tag}"
+
+
 def train_or_load(name: str, ts: int, args, dataset):
     """The variant ``name`` trained with training seed ``ts`` (or loaded from ``--out``): (policy, run dir)."""
     from benchmarks.resumable import is_trained, train_steps
@@ -113,9 +123,7 @@ def train_or_load(name: str, ts: int, args, dataset):
     from coursekit.policies import make_policy
 
     kind, fields, _ = VARIANTS[name]
-    slug = re.sub(r"[^a-z0-9]+", "-", name.lower()).strip("-")
-    data = "" if args.data.name == DATA.name else f"_{args.data.stem}"  # runs on other demonstrations never mix
-    run = args.out / f"{slug}_seed{ts}_s{args.steps}{data}"
+    run = run_dir(args.out, name, ts, args.steps, args.data)
     if is_trained(run):
         return load_checkpoint(run, device="cpu"), run
     cfg = dict(fields)
