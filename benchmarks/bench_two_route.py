@@ -42,7 +42,6 @@ from benchmarks.protocol import t_estimate
 from benchmarks.resumable import cache_dir
 
 SECTION = "Claims (PushT, two-route start)"
-ROOT = Path(__file__).resolve().parent.parent
 CACHE = cache_dir("two_route")
 """The trained models and per-start results (outside the repository; an existing one is reused)."""
 PATHS = ("cw", "ccw", "between")
