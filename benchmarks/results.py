@@ -32,6 +32,16 @@ def load() -> dict:
     return json.loads(RESULTS.read_text())
 
 
+def cpu_model() -> str:
+    """The CPU's model name (``/proc/cpuinfo``), else what ``platform`` knows: rows and golden files name it."""
+    try:
+        names = [ln.split(":", 1)[1].strip() for ln in Path("/proc/cpuinfo").read_text().splitlines()
+                 if ln.startswith("model name")]
+    except OSError:
+        names = []
+    return names[0] if names else (platform.processor() or platform.machine())
+
+
 def record(section: str, name: str, value: float | str, unit: str, command: str,
            target: str = "", note: str = "", interval: tuple[float, float] | None = None,
            n: int | None = None, seeds: str = "") -> None:
@@ -44,7 +54,7 @@ def record(section: str, name: str, value: float | str, unit: str, command: str,
     entry = {
         "section": section, "name": name, "value": value, "unit": unit, "target": target,
         "command": command, "note": note, "measured": time.strftime("%Y-%m-%d"),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores",
+        "machine": f"{platform.machine()}, {os.cpu_count()} cores, {cpu_model()}",
     }
     if interval is not None:
         lo, hi = (float(v) for v in interval)

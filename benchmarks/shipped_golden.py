@@ -35,14 +35,9 @@ def fingerprint() -> dict[str, str]:
     """What a network's rounding depends on: torch's version and build, and the CPU."""
     import torch
 
-    cpu = platform.processor() or platform.machine()
-    try:
-        names = [ln.split(":", 1)[1].strip() for ln in Path("/proc/cpuinfo").read_text().splitlines()
-                 if ln.startswith("model name")]
-        cpu = names[0] if names else cpu
-    except OSError:
-        pass
-    return {"torch": torch.__version__, "cpu": cpu, "python": platform.python_version()}
+    from benchmarks.results import cpu_model
+
+    return {"torch": torch.__version__, "cpu": cpu_model(), "python": platform.python_version()}
 
 
 def weights_sha256(checkpoint: Path) -> str:
