@@ -56,9 +56,6 @@ HEADS = {  # name -> (checkpoint dir, task, sampling options, label)
     "flow-tp32": ("pusht_flow_state_tp32", "pusht", {}, "PushT flow Euler-10 (Tp = 32)"),
     "dp-pixels": ("pusht_diffusion_pixels", "pusht", {}, "PushT pixel DP DDIM-10 (two 96x96 frames at 48x48)"),
 }
-UNTRAINED_FOR_LATENCY = ("dp-pixels",)
-"""Heads whose latency part may time their architecture with fresh weights until a checkpoint exists:
-how long a chunk takes does not depend on the weights (chapter 12's pixel policy, issue of its shipping)."""
 DELAYS = (0, 1, 2, 4, 8)
 STRATEGY_NAMES = tuple(STRATEGIES)  # sync, async, ensemble, rtc
 
@@ -106,13 +103,18 @@ def pixel_architecture():
     return policy
 
 
+UNTRAINED_FOR_LATENCY = {"dp-pixels": pixel_architecture}
+"""Head -> its architecture with fresh weights, which the latency part times until a checkpoint exists:
+how long a chunk takes does not depend on the weights (chapter 12's pixel policy, not shipped yet)."""
+
+
 def part_latency(args: argparse.Namespace) -> None:
     from coursekit.evaluate.latency import chunk_latency_ms, latency_delay
 
     for name in args.heads:
         policy, weights = load_head(name), ""
         if policy is None and name in UNTRAINED_FOR_LATENCY:
-            policy, weights = pixel_architecture(), "its architecture with fresh weights (no checkpoint yet: the time per chunk does not depend on the weights); "
+            policy, weights = UNTRAINED_FOR_LATENCY[name](), "its architecture with fresh weights (no checkpoint yet: the time per chunk does not depend on the weights); "
         if policy is None:
             print(missing_head(name))
             continue
