@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 from pathlib import Path
 
 import numpy as np
@@ -69,16 +68,12 @@ def demonstrations(out: Path):
 
 def train_or_load(name: str, ts: int, args: argparse.Namespace, dataset):
     """The variant ``name`` trained with seed ``ts`` for ``--steps`` (resumed or loaded from ``--out``)."""
-    from benchmarks.resumable import is_trained, train_steps
-    from coursekit.checkpoint import load_checkpoint
+    from benchmarks.resumable import load_or_train, run_slug
     from coursekit.policies import make_policy
 
-    slug = re.sub(r"[^a-z0-9]+", "-", name.lower()).strip("-")
-    run = args.out / f"{slug}_seed{ts}_s{args.steps}"
-    if is_trained(run):
-        return load_checkpoint(run, device="cpu"), run
-    policy, batches, recipe = make_policy("act", dataset, recipe="cpu", seed=ts, **VARIANTS[name])
-    return train_steps(policy, batches, recipe, run, args.steps, ts, args.threads, dataset.meta), run
+    run = args.out / f"{run_slug(name)}_seed{ts}_s{args.steps}"
+    build = lambda: make_policy("act", dataset, recipe="cpu", seed=ts, **VARIANTS[name])  # noqa: E731
+    return load_or_train(run, build, args.steps, ts, args.threads, dataset.meta), run
 
 
 def executor_factory(executor: str, k: int):

@@ -32,13 +32,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 from pathlib import Path
 
 import numpy as np
 
 from benchmarks.protocol import add_protocol_args, protocol_seeds, t_estimate
-from benchmarks.resumable import cache_dir
+from benchmarks.resumable import cache_dir, run_slug
 from coursekit.atomic import atomic_write_text
 
 SECTION = "Chunk ablation (PushT)"
@@ -110,27 +109,23 @@ def run_dir(out: Path, name: str, ts: int, steps: int, data: Path) -> Path:
 
     Runs on the shipped models' demonstrations (a file named like :data:`DATA`) keep the plain name;
     runs on any other data set carry its file stem, so two data sets never share a run."""
-    slug = re.sub(r"[^a-z0-9]+", "-", name.lower()).strip("-")
     tag = "" if data.name == DATA.name else f"_{data.stem}"
-    return out / f"{slug}_seed{ts}_s{steps}{tag}"
+    return out / f"{run_slug(name)}_seed{ts}_s{steps}{tag}"
 
 
 def train_or_load(name: str, ts: int, args, dataset):
     """The variant ``name`` trained with training seed ``ts`` (or loaded from ``--out``): (policy, run dir)."""
-    from benchmarks.resumable import is_trained, train_steps
-    from coursekit.checkpoint import load_checkpoint
+    from benchmarks.resumable import load_or_train
     from coursekit.nn.unet1d import UNet1DConfig
     from coursekit.policies import make_policy
 
     kind, fields, _ = VARIANTS[name]
-    run = run_dir(args.out, name, ts, args.steps, args.data)
-    if is_trained(run):
-        return load_checkpoint(run, device="cpu"), run
     cfg = dict(fields)
     if "unet" in cfg:
         cfg["unet"] = UNet1DConfig(**cfg["unet"])
-    policy, batches, recipe = make_policy(kind, dataset, features="pusht_keypoints", recipe="cpu", seed=ts, **cfg)
-    return train_steps(policy, batches, recipe, run, args.steps, ts, args.threads, dataset.meta), run
+    run = run_dir(args.out, name, ts, args.steps, args.data)
+    build = lambda: make_policy(kind, dataset, features="pusht_keypoints", recipe="cpu", seed=ts, **cfg)  # noqa: E731
+    return load_or_train(run, build, args.steps, ts, args.threads, dataset.meta), run
 
 
 def data_label(meta: dict) -> str:

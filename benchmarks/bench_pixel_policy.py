@@ -133,17 +133,16 @@ def _pixel_policy(args: argparse.Namespace, dataset):
 
 def part_policy(args: argparse.Namespace, record) -> None:
     from benchmarks.bench_chunk_ablation import evaluate_saved
-    from benchmarks.resumable import is_trained, train_steps
-    from coursekit.checkpoint import load_checkpoint, read_checkpoint_info
+    from benchmarks.resumable import load_or_train
+    from coursekit.checkpoint import read_checkpoint_info
     from coursekit.data.episodes import EpisodeDataset
     from coursekit.stats import mean_estimate
 
     run = args.out / f"dp_{args.route}_p{args.pretrain_steps if args.route == 'two-stage' else 0}_s{args.policy_steps}_seed{args.seed}"
     dataset = EpisodeDataset.load(args.data)
-    if not is_trained(run):
-        policy, batches, recipe = _pixel_policy(args, dataset)
-        train_steps(policy, batches, recipe, run, args.policy_steps, args.seed, args.threads, dataset.meta)
-    policy, training = load_checkpoint(run, device="cpu"), read_checkpoint_info(run)["training"]
+    policy = load_or_train(run, lambda: _pixel_policy(args, dataset), args.policy_steps, args.seed, args.threads,
+                           dataset.meta)
+    training = read_checkpoint_info(run)["training"]
     seeds = list(range(100_000, 100_000 + args.episodes))
     saved = evaluate_saved(policy, run / f"eval_{seeds[0]}_{len(seeds)}.json", seeds, dataset.meta, {})
     est = mean_estimate(saved["max_reward"])

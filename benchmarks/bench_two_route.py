@@ -168,9 +168,8 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit(f"--jitter must be in [0, 20] px (the start must stay the two-way one), got {args.jitter}")
     import torch
 
-    from benchmarks.resumable import is_trained, train_steps
+    from benchmarks.resumable import load_or_train
     from coursekit.atomic import atomic_write_text
-    from coursekit.checkpoint import load_checkpoint
     from coursekit.data.episodes import EpisodeDataset
     from coursekit.nn.unet1d import UNet1DConfig
     from coursekit.policies import make_policy
@@ -197,12 +196,9 @@ def main(argv: list[str] | None = None) -> int:
             if file.exists():
                 results.setdefault(label, []).append(json.loads(file.read_text()))
                 continue
-            if is_trained(run):
-                policy = load_checkpoint(run, device="cpu")
-            else:
-                policy, batches, recipe = make_policy(kind, data, features="pusht_keypoints", recipe="cpu", seed=ts,
-                                                      unet=UNet1DConfig(down_dims=tuple(args.down_dims)))
-                policy = train_steps(policy, batches, recipe, run, args.steps, ts, args.threads, data.meta)  # EMA
+            policy = load_or_train(run, lambda: make_policy(kind, data, features="pusht_keypoints", recipe="cpu", seed=ts,
+                                                            unet=UNet1DConfig(down_dims=tuple(args.down_dims))),
+                                   args.steps, ts, args.threads, data.meta)
             out = measure(policy, sampling, runs, starts, seed=ts)
             atomic_write_text(file, json.dumps(out) + "\n")
             results.setdefault(label, []).append(out)

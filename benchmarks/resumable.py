@@ -12,7 +12,9 @@ than minutes keeps a result independent of what else shares the core.
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
+from typing import Callable
 
 CACHE_ROOT = Path(os.environ.get("XDG_CACHE_HOME", "~/.cache")).expanduser() / "coursekit"
 """Where the long benchmarks keep their runs, evaluations and data sets: never the repository."""
@@ -21,6 +23,11 @@ CACHE_ROOT = Path(os.environ.get("XDG_CACHE_HOME", "~/.cache")).expanduser() / "
 def cache_dir(name: str) -> Path:
     """``CACHE_ROOT / name`` (not created): one benchmark's runs, or ``data`` for the data sets they share."""
     return CACHE_ROOT / name
+
+
+def run_slug(name: str) -> str:
+    """A variant's display name as a folder name: "ACT k=100 without CVAE" -> "act-k-100-without-cvae"."""
+    return re.sub(r"[^a-z0-9]+", "-", name.lower()).strip("-")
 
 
 def state_path(run: Path) -> Path:
@@ -56,3 +63,19 @@ def train_steps(policy, batches, recipe: dict, run: Path, steps: int, seed: int,
                    state_file=state)
     state.unlink(missing_ok=True)
     return result.policy
+
+
+def load_or_train(run: Path, build: Callable[[], tuple], steps: int, seed: int, threads: int = 1,
+                  dataset_meta: dict | None = None):
+    """The policy of ``run``: its checkpoint when finished, else ``build()`` trained (or resumed) for ``steps``.
+
+    ``build`` returns ``(policy, batches, recipe)`` as :func:`coursekit.policies.make_policy` does; it is
+    only called when there is something to train, so a finished run costs no data loading or model
+    building beyond the checkpoint's.
+    """
+    from coursekit.checkpoint import load_checkpoint
+
+    if is_trained(run):
+        return load_checkpoint(run, device="cpu")
+    policy, batches, recipe = build()
+    return train_steps(policy, batches, recipe, run, steps, seed, threads, dataset_meta)
