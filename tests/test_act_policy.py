@@ -157,6 +157,9 @@ def test_image_tokens_smoke():
     assert chunk.shape == (2, K, Da)
     with pytest.raises(ValueError, match="image"):
         policy.predict_chunk(np.zeros((2, 1, Do)))
+    with pytest.raises(ValueError, match=r"float observation 'image' must lie in \[0, 1\]; got values in \[0, 255\]"):
+        policy.predict_chunk({"obs": np.zeros((2, 1, Do)), "image": np.full((2, 1, 3, 32, 32), 255.0, np.float32)
+                              * (np.arange(2)[:, None, None, None, None] > 0)})  # 0..255 floats: white, refused
 
 
 @pytest.mark.slow

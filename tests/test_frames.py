@@ -77,9 +77,24 @@ def test_an_image_policy_refuses_0_255_floats_ints_and_channels_last():
     pos = np.zeros((1, 2, 2), np.float32)
     ok = np.random.default_rng(0).uniform(0, 1, size=(1, 2, 3, 32, 32)).astype(np.float32)
     assert policy.predict_chunk({"image": ok, "agent_pos": pos}, num_inference_steps=1).shape == (1, 16, 2)
-    with pytest.raises(ValueError, match=r"must lie in \[0, 1\], got values in \[.*\].*as uint8"):
+    with pytest.raises(ValueError, match=r"float observation 'image' must lie in \[0, 1\]; got values in \[.*\].*as uint8"):
         policy.predict_chunk({"image": ok * 255.0, "agent_pos": pos}, num_inference_steps=1)
-    with pytest.raises(ValueError, match="uint8 0..255 or float in \\[0, 1\\], got torch.int64"):
+    with pytest.raises(ValueError, match="observation 'image' must be uint8 0..255 or float in \\[0, 1\\]; got dtype int64"):
         policy.predict_chunk({"image": (ok * 255).astype(np.int64), "agent_pos": pos}, num_inference_steps=1)
     with pytest.raises(ValueError, match="channels last"):
         policy.predict_chunk({"image": torch.zeros(1, 2, 32, 32, 3, dtype=torch.uint8), "agent_pos": pos})
+
+
+@pytest.mark.parametrize("values, words", [
+    (np.full((2, 3), 255.0, np.float32), r"float x must lie in \[0, 1\]; got values in \[255, 255\]"),
+    (np.full((2, 3), 3, np.int32), "x must be uint8 0..255 or float in \\[0, 1\\]; got dtype int32"),
+    (np.array([0.5, np.inf], np.float32), "x contain NaN or inf"),
+])
+def test_numpy_frames_and_torch_frames_meet_one_check(values, words):
+    from coursekit.data.frames import check_values
+
+    for images in (values, torch.as_tensor(values)):  # the data set's frames, a policy's observation
+        with pytest.raises(ValueError, match=words):
+            check_values(images, "x")
+    check_values(np.zeros((2, 3), np.uint8), "x")
+    check_values(torch.rand(2, 3), "x")

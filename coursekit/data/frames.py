@@ -11,6 +11,8 @@ a convolution), so it is refused here with one line that names what came and wha
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 EXPECTED = "(N, H, W, 3) or (N, 3, H, W), uint8 0..255 or float in [0, 1]"
@@ -30,14 +32,29 @@ def frames_chw(images, size: tuple[int, int], name: str = "images") -> np.ndarra
     if tuple(a.shape[2:]) != tuple(size):
         raise ValueError(f"{name} are {a.shape[2]}x{a.shape[3]} frames; this policy's encoder expects "
                          f"{size[0]}x{size[1]} (VisionEncoderConfig.frame_size): render or resize them to that")
+    check_values(a, name)
     if a.dtype == np.uint8:
         return np.ascontiguousarray(a)
-    if not np.issubdtype(a.dtype, np.floating):
-        raise ValueError(f"{name} must be uint8 0..255 or float in [0, 1]; got dtype {a.dtype}")
-    if a.size and not np.isfinite(a).all():
+    return np.ascontiguousarray(np.rint(a * 255.0).astype(np.uint8))
+
+
+def check_values(images, name: str = "images") -> None:
+    """Raise a ValueError unless ``images`` (a numpy array or a torch tensor, any shape) are uint8,
+    or float within [0, 1]; the message names ``name`` and the dtype or value range that came.
+
+    One check for both ends: the data set's frames at training (via :func:`frames_chw`) and the
+    raw observation a policy is handed (``UNetChunkPolicy``), which may already sit on a device.
+    """
+    kind = str(images.dtype).removeprefix("torch.")
+    if kind == "uint8":
+        return
+    if not kind.startswith(("float", "bfloat")):
+        raise ValueError(f"{name} must be uint8 0..255 or float in [0, 1]; got dtype {kind}")
+    if math.prod(images.shape) == 0:
+        return
+    lo, hi = float(images.min()), float(images.max())  # NaN propagates through min and max
+    if not (math.isfinite(lo) and math.isfinite(hi)):
         raise ValueError(f"{name} contain NaN or inf (float frames must lie in [0, 1])")
-    lo, hi = (float(a.min()), float(a.max())) if a.size else (0.0, 0.0)
     if lo < 0.0 or hi > 1.0:
         raise ValueError(f"float {name} must lie in [0, 1]; got values in [{lo:g}, {hi:g}] "
                          f"(0..255 frames: pass them as uint8)")
-    return np.ascontiguousarray(np.rint(a * 255.0).astype(np.uint8))

@@ -42,6 +42,7 @@ from torch import nn
 
 from coursekit.data.batches import ChunkBatcher
 from coursekit.data.normalize import MeanStdNormalizer
+from coursekit.data.frames import check_values
 from coursekit.execution.spec import ExecutionSpec
 from coursekit.nn.act_transformer import ACTTransformer, TransformerEncoder
 from coursekit.nn.kl import gaussian_kl
@@ -275,6 +276,7 @@ class ACTPolicy(ChunkPolicy):
         if c.obs_type == "image":
             if img is None:
                 raise ValueError("an image ACT policy needs obs_history['image'] (B, To, C, H, W) or (B, C, H, W)")
+            check_values(torch.as_tensor(img), "observation 'image'")  # 0..255 floats would saturate
             images = as_float_tensor(img, "observation 'image'", self.device)
             if images.dim() == 5:
                 images = images[:, -1]  # (B, C, H, W)

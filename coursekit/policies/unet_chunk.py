@@ -28,6 +28,7 @@ import torch
 
 from coursekit.data.batches import WindowBatcher
 from coursekit.data.normalize import MinMaxNormalizer
+from coursekit.data.frames import check_values
 from coursekit.execution.rtc import MAX_GUIDANCE, PREFIX_MODES, GuidedHead, sample_guided
 from coursekit.execution.spec import check_horizons
 from coursekit.nn.unet1d import ConditionalUnet1D, UNet1DConfig
@@ -157,14 +158,7 @@ class UNetChunkPolicy(ChunkPolicy):
                 hint = " (channels last? frames go channels first)" if img.shape[-1] == c.vision.in_channels else ""
                 raise ValueError(f"observation 'image' must have shape (B, {', '.join(map(str, want))}) "
                                  f"(uint8 0..255 or float in [0, 1]), got {tuple(img.shape)}{hint}")
-            if img.dtype != torch.uint8:  # floats must be [0, 1]: 0..255 floats would saturate, ints are ambiguous
-                if not torch.as_tensor(obs_history["image"]).is_floating_point():
-                    raise ValueError(f"observation 'image' must be uint8 0..255 or float in [0, 1], got "
-                                     f"{torch.as_tensor(obs_history['image']).dtype}")
-                lo, hi = float(img.min()), float(img.max())
-                if lo < 0.0 or hi > 1.0:
-                    raise ValueError(f"observation 'image' as float must lie in [0, 1], got values in [{lo:g}, {hi:g}] "
-                                     f"(0..255 frames: pass them as uint8)")
+            check_values(torch.as_tensor(obs_history["image"]), "observation 'image'")  # 0..255 floats would saturate
         return out, unbatched
 
     def encode_obs(self, obs: Mapping[str, torch.Tensor]) -> torch.Tensor:
