@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from coursekit.data.episodes import EpisodeDataset
-from coursekit.data.multimodality import MultimodalityConfig, is_two_way, two_way_fraction
+from coursekit.data.multimodality import MultimodalityConfig, Neighbourhoods, is_two_way, two_way_fraction
 
 
 def _fan(directions_deg, n_per_direction=4, steps=20):
@@ -36,6 +36,17 @@ def test_opposite_directions_from_one_start_are_two_way():
     first = np.isin(m.query_rows % 20, [0])
     assert m.n_supported >= 1 and m.fraction == 1.0
     assert (m.two_way[~first] == -1).all()
+
+
+def test_neighbourhoods_built_once_give_the_same_measure():
+    cfg = MultimodalityConfig(n_queries=400, radius=5.0)
+    data = _fan([0.0, 180.0])
+    again = two_way_fraction(Neighbourhoods(data, cfg))
+    m = two_way_fraction(data, cfg)
+    assert (again.fraction, again.lo, again.hi) == (m.fraction, m.lo, m.hi)
+    assert np.array_equal(again.two_way, m.two_way) and np.array_equal(again.query_rows, m.query_rows)
+    with pytest.raises(ValueError, match="differs from the Neighbourhoods' own"):
+        two_way_fraction(Neighbourhoods(data, cfg), MultimodalityConfig(radius=9.0))
 
 
 def test_is_two_way_follows_its_definition():

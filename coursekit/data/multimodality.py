@@ -159,8 +159,16 @@ class Neighbourhoods:
 def two_way_fraction(dataset, config: MultimodalityConfig | None = None, seed: int = 0,
                      n_boot: int = 1000) -> Multimodality:
     """The two-way fraction of a PushT ``dataset`` (``EpisodeDataset`` with "state" (N, 5),
-    "action" (N, 2), "phase" (N,)), on ``config.n_queries`` rows drawn with ``seed``."""
-    hood = Neighbourhoods(dataset, config)
+    "action" (N, 2), "phase" (N,)), on ``config.n_queries`` rows drawn with ``seed``.
+
+    ``dataset`` may also be its :class:`Neighbourhoods` (then ``config`` is the one it was built
+    with), so that a caller who draws the neighbours afterwards builds the KD-tree once."""
+    if isinstance(dataset, Neighbourhoods):
+        if config is not None and config != dataset.config:
+            raise ValueError(f"config {config} differs from the Neighbourhoods' own {dataset.config}")
+        hood = dataset
+    else:
+        hood = Neighbourhoods(dataset, config)
     candidates = np.flatnonzero(np.isin(hood.phase, PUSHER_PHASES))
     rng = np.random.default_rng(seed)
     rows = np.sort(rng.choice(candidates, size=min(hood.config.n_queries, len(candidates)), replace=False))
