@@ -10,8 +10,9 @@ choosing a design that trains here, this benchmark measures, on one torch thread
   for the paper's widths (``resnet18``: 64/128/256/512), the course's ``cpu`` preset (32/.../256)
   and narrower or lower-resolution variants.
 - ``policy``: samples per second of a whole Diffusion Policy training step on ``pusht_image``
-  features (To = 2 frames through the encoder, then the U-Net's epsilon loss), with the U-Net
-  alone on the same batch (its condition given) for comparison: the encoder's share of a step.
+  features (To = 2 frames through the encoder, then the U-Net's epsilon loss), and the encoder's
+  share of it (its forward, and backward when trained, timed alone): for the ``cpu`` encoder and
+  the ``small`` one of the two-stage route, trained end to end or frozen (:data:`POLICIES`).
 
 Rows go to "Pixels (PushT): training throughput" with the 1-minute load average in each note (run
 it on an idle machine: these are speeds, and a busy core halves them)::
@@ -98,34 +99,55 @@ def part_encoder(args, record) -> None:
                f"{COMMAND} --only encoder", note=_load_note(f"; batch {args.batch}, {params:.2f} M parameters"))
 
 
-def _image_policy(n_demos: int, batch: int):
+POLICIES = {  # label -> (VisionEncoderConfig preset, encoder trained by the loss?)
+    "cpu encoder": ("cpu", True),
+    "small encoder, end to end": ("small", True),
+    "small encoder frozen (two-stage route, stage 2)": ("small", False),
+}
+
+
+def _image_policy(n_demos: int, batch: int, preset: str):
     from coursekit.experts.pusht_planner import collect_dataset
     from coursekit.nn.vision import VisionEncoderConfig
     from coursekit.policies import make_policy
 
     data = collect_dataset(n_demos, seed=0, progress=False)
     return make_policy("diffusion", data, features="pusht_image", recipe="cpu", batch_size=batch,
-                       vision=VisionEncoderConfig())
+                       vision=VisionEncoderConfig.preset(preset))
 
 
 def part_policy(args, record) -> None:
+    """Samples/s of a whole training step, and the encoder's share of it (the rest is the U-Net's)."""
     import torch
 
-    setup = _image_policy(args.demos, args.batch)
-    policy, batches = setup.policy, iter(setup.batches)
-    opt = torch.optim.AdamW(policy.parameters(), lr=1e-4)
-    batch = next(batches)
+    for label, (preset, trained) in POLICIES.items():
+        setup = _image_policy(args.demos, args.batch, preset)
+        policy, batch = setup.policy, next(iter(setup.batches))
+        policy.vision_encoder.requires_grad_(trained)  # frozen: stage 2 of the two-stage route
+        opt = torch.optim.AdamW([p for p in policy.parameters() if p.requires_grad], lr=1e-4)
+        obs = {k: torch.as_tensor(batch[k]) for k in ("image", "agent_pos")}  # (B, To, ...)
 
-    def step():
-        opt.zero_grad()
-        policy.compute_loss(batch)["loss"].backward()
-        opt.step()
+        def step():
+            opt.zero_grad()
+            policy.compute_loss(batch)["loss"].backward()
+            opt.step()
 
-    per_s = args.batch * _rate(step, args.repeats)
-    print(f"Diffusion Policy on pusht_image (cpu encoder, To = 2 frames): {per_s:.0f} samples/s")
-    record(SECTION, "Diffusion Policy training step on pusht_image, cpu encoder: samples per second", round(per_s),
-           "samples/s", f"{COMMAND} --only policy",
-           note=_load_note(f"; batch {args.batch} samples of To = 2 frames each, U-Net preset cpu, {args.demos} demos"))
+        def encode():  # the encoder's part of a step: forward, and backward when it is trained
+            with torch.set_grad_enabled(trained):
+                cond = policy.encode_obs(obs)  # (B, To*(F+Dp))
+            if trained:
+                cond.sum().backward()
+
+        steps_s = _rate(step, args.repeats)
+        per_s, share = args.batch * steps_s, min(1.0, steps_s / _rate(encode, args.repeats))  # t_encode / t_step
+        print(f"Diffusion Policy on pusht_image ({label}, To = 2 frames): {per_s:.0f} samples/s, "
+              f"encoder {100 * share:.0f} % of a step")
+        note = _load_note(f"; batch {args.batch} samples of To = 2 frames each (frames rendered once, not per step), "
+                          f"encoder preset {preset}{'' if trained else ' frozen'}, U-Net preset cpu, {args.demos} demos")
+        record(SECTION, f"Diffusion Policy training step on pusht_image, {label}: samples per second", round(per_s),
+               "samples/s", f"{COMMAND} --only policy", note=note)
+        record(SECTION, f"Diffusion Policy training step on pusht_image, {label}: encoder share of the step",
+               round(100 * share), "%", f"{COMMAND} --only policy", note=note + "; the rest is the U-Net's loss and step")
 
 
 def main(argv: list[str] | None = None) -> None:
