@@ -148,7 +148,8 @@ def measure(policy, sampling: dict, runs: list, starts: np.ndarray, seed: int) -
             "stalled": stall.tolist(), "seconds": r.seconds}
 
 
-def main(argv: list[str] | None = None) -> int:
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    """The command line, checked (a bad value exits with a line that names it)."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs-each", type=int, default=6, help="expert runs per side from TWO_WAY_START (chapter 1: 6)")
     parser.add_argument("--train-seeds", type=int, nargs="+", default=[0, 1, 2])
@@ -166,27 +167,18 @@ def main(argv: list[str] | None = None) -> int:
             raise SystemExit(f"--{flag.replace('_', '-')} must be >= 1, got {getattr(args, flag)}")
     if not 0.0 <= args.jitter <= 20.0:
         raise SystemExit(f"--jitter must be in [0, 20] px (the start must stay the two-way one), got {args.jitter}")
-    import torch
+    return args
 
+
+def measure_heads(args: argparse.Namespace, runs: list, data) -> dict[str, list[dict]]:
+    """label -> one :func:`measure` result per training seed: each head trained (or loaded) on ``data``
+    and measured from the jittered starts; every result is cached in its run folder."""
     from benchmarks.resumable import load_or_train
     from coursekit.atomic import atomic_write_text
-    from coursekit.data.episodes import EpisodeDataset
     from coursekit.nn.unet1d import UNet1DConfig
     from coursekit.policies import make_policy
-    from coursekit.stats import rate_estimate
-    from coursekit.tasks import PUSHT
 
-    torch.set_num_threads(args.threads)
-    runs, coins = two_route_runs(args.runs_each)
-    data = EpisodeDataset.from_episodes([{"state": r.states, "action": r.actions, "coverage": r.coverage,
-                                          "phase": r.phases} for r in runs],
-                                        {"env_id": PUSHT.gym_id, "obs_type": "state", "episode_seeds": [],
-                                         "two_route_coin_seeds": coins})
-    print(f"{len(runs)} expert runs from TWO_WAY_START (coin seeds {coins}): {data.n_steps} steps", flush=True)
     tag = f"runs{args.runs_each}_s{args.steps}_u{'-'.join(map(str, args.down_dims))}"
-    cmd = (f".venv/bin/python -m benchmarks.bench_two_route --runs-each {args.runs_each} --steps {args.steps} "
-           f"--down-dims {' '.join(map(str, args.down_dims))} --train-seeds {' '.join(map(str, args.train_seeds))} "
-           f"--rollouts {args.rollouts} --jitter {args.jitter:g} --threads {args.threads}")
     starts = jittered_starts(args.rollouts, args.jitter)
     results: dict[str, list[dict]] = {}
     for label, (kind, sampling) in HEADS.items():
@@ -204,13 +196,22 @@ def main(argv: list[str] | None = None) -> int:
             results.setdefault(label, []).append(out)
             print(f"{label}, training seed {ts}: first chunks {dict((s, out['paths'].count(s)) for s in PATHS)}"
                   f"; score {np.mean(out['max_reward']):.3f}, stalled {np.mean(out['stalled']):.1f} steps", flush=True)
+    return results
 
-    k = len(args.train_seeds)
+
+def record_rows(args: argparse.Namespace, results: dict[str, list[dict]], n_runs: int) -> None:
+    """Per head: the share of first chunks between the routes (Wilson), the score and the steps
+    stalled (t-intervals over training seeds); printed, and recorded unless ``--no-record``."""
+    from coursekit.stats import rate_estimate
+
+    cmd = (f".venv/bin/python -m benchmarks.bench_two_route --runs-each {args.runs_each} --steps {args.steps} "
+           f"--down-dims {' '.join(map(str, args.down_dims))} --train-seeds {' '.join(map(str, args.train_seeds))} "
+           f"--rollouts {args.rollouts} --jitter {args.jitter:g} --threads {args.threads}")
     where = f"{args.rollouts} starts within {args.jitter:g} px of TWO_WAY_START; training seeds {args.train_seeds[0]}-{args.train_seeds[-1]}"
     conditions = (f"{args.rollouts} starts (pusher within {args.jitter:g} px of TWO_WAY_START's, block as there) per "
-                  f"training seed; trained on {len(runs)} expert runs from TWO_WAY_START ({args.runs_each} cw + {args.runs_each} ccw) and "
+                  f"training seed; trained on {n_runs} expert runs from TWO_WAY_START ({args.runs_each} cw + {args.runs_each} ccw) and "
                   f"nothing else; U-Net {args.down_dims}, To=2, Tp=16, Ta=8, keypoints, recipe cpu, {args.steps} "
-                  f"steps; {k} training seed(s) {args.train_seeds}")
+                  f"steps; {len(args.train_seeds)} training seed(s) {args.train_seeds}")
 
     def rec(name, value, lo, hi, n, note):
         print(f"  {name}: {value:.3f} [{lo:.3f}, {hi:.3f}] (n={n}); {note}", flush=True)
@@ -230,13 +231,30 @@ def main(argv: list[str] | None = None) -> int:
             f"nearer the mean of all "
             f"expert first chunks than the mean cw one ({np.mean(paths == 'cw'):.2f}) or the mean ccw one "
             f"({np.mean(paths == 'ccw'):.2f}); {conditions}")
-        for figure, key, scale in (("score", "max_reward", 1.0), ("steps stalled against the T", "stalled", 1.0)):
-            per_seed = [float(np.mean(o[key])) * scale for o in outs]
+        for figure, key in (("score", "max_reward"), ("steps stalled against the T", "stalled")):
+            per_seed = [float(np.mean(o[key])) for o in outs]
             mean, lo, hi = t_estimate(per_seed)
             lo, hi = max(0.0, lo), (min(1.0, hi) if figure == "score" else hi)  # neither can be negative
             rec(f"{label}: {figure} from starts near TWO_WAY_START", mean, lo, hi, sum(len(o[key]) for o in outs),
                 f"mean over training seeds (per seed: {', '.join(f'{v:.3f}' for v in per_seed)}), each the mean of "
                 f"{len(outs[0][key])} episode(s) of 300 steps; 95 % t-interval over training seeds; {conditions}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    import torch
+
+    from coursekit.data.episodes import EpisodeDataset
+    from coursekit.tasks import PUSHT
+
+    torch.set_num_threads(args.threads)
+    runs, coins = two_route_runs(args.runs_each)
+    data = EpisodeDataset.from_episodes([{"state": r.states, "action": r.actions, "coverage": r.coverage,
+                                          "phase": r.phases} for r in runs],
+                                        {"env_id": PUSHT.gym_id, "obs_type": "state", "episode_seeds": [],
+                                         "two_route_coin_seeds": coins})
+    print(f"{len(runs)} expert runs from TWO_WAY_START (coin seeds {coins}): {data.n_steps} steps", flush=True)
+    record_rows(args, measure_heads(args, runs, data), len(runs))
     return 0
 
 
