@@ -155,7 +155,8 @@ def evaluate_shipped(args: argparse.Namespace, rec) -> None:
             interval=(round(score.lo, 3), round(score.hi, 3)), n=score.n, seeds=seed_range)
 
 
-def main(argv: list[str] | None = None) -> None:
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    """The command line, checked; the recipe's lr and batch size filled in where not given."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--only", choices=["throughput", "score", "shipped"], default=None,
                         help="run one part (shipped: evaluate coursekit/checkpoints/pusht_*_state as notebook 05 does)")
@@ -197,6 +198,66 @@ def main(argv: list[str] | None = None) -> None:
     base = TrainConfig.recipe(args.recipe, max_steps=1)
     args.lr = args.lr if args.lr is not None else base.lr
     args.batch_size = args.batch_size if args.batch_size is not None else base.batch_size
+    return args
+
+
+def part_throughput(args: argparse.Namespace, dataset, rec, machine: str) -> None:
+    """Training samples/s of the CPU default U-Net at batch 256 and at ``--batch-size`` (rows)."""
+    for bs in sorted({256, args.batch_size}):
+        sps = throughput(dataset, args.threads, seconds=60.0, batch_size=bs, features=args.features)
+        print(f"training throughput, batch {bs}: {sps:.0f} samples/s")
+        rec(SECTION, f"training throughput (CPU default U-Net, batch {bs})", round(sps), "samples/s",
+            f"{COMMAND} --only throughput",
+            note=f"U-Net 64/128/256 (4.5 M params), full trainer step incl. EMA; 60 s after warm-up; {machine}")
+
+
+def resolve_regression_steps(args: argparse.Namespace) -> None:
+    """``--regression-steps match``: as many optimiser steps as the diffusion checkpoint in ``--out``."""
+    if args.regression_steps == "match":
+        dp_dir = run_dir("diffusion", args)
+        if not (dp_dir / "config.json").is_file():
+            raise FileNotFoundError(f"--regression-steps match needs the diffusion checkpoint {str(dp_dir)!r}; "
+                                    f"train it first (--policies diffusion)")
+        args.regression_steps = int(read_checkpoint_info(dp_dir)["training"]["steps"])
+        print(f"regression baseline: {args.regression_steps} optimiser steps, as many as {dp_dir.name}")
+    elif args.regression_steps is not None:
+        args.regression_steps = int(args.regression_steps)
+
+
+def train_in_parallel(args: argparse.Namespace, dataset, outs: dict[str, Path]) -> dict[str, dict]:
+    """Both trainings at once, one torch thread (one core) each: half the wall-clock time."""
+    one = argparse.Namespace(**{**vars(args), "threads": 1})
+    ctx = multiprocessing.get_context("spawn")
+    side = ctx.Process(target=train_policy, args=("regression", dataset, one, outs["regression"]))
+    side.start()
+    summaries = {"diffusion": train_policy("diffusion", dataset, one, outs["diffusion"])}
+    side.join()
+    if side.exitcode != 0:
+        raise RuntimeError(f"the regression training process failed (exit code {side.exitcode})")
+    summaries["regression"] = read_checkpoint_info(outs["regression"])["training"]
+    return summaries
+
+
+def evaluate_trained(kind: str, out: Path, summary: dict, args: argparse.Namespace) -> None:
+    """Print the held-out score of one trained (and, with ``--ship``, shipped) checkpoint, per sampler."""
+    if args.ship:  # ship float16 weights (half the size) and evaluate exactly what is shipped
+        out = copy_checkpoint_half(out, SHIP[kind])
+    policy = load_checkpoint(out, device="cpu")
+    dataset_meta = read_checkpoint_info(out)["dataset"]
+    if args.ddim_spacing is not None and kind == "diffusion":
+        policy.config = dataclasses.replace(policy.config, ddim_timestep_spacing=args.ddim_spacing)
+    samplers = [("ddim", 10), ("ddpm", 100)] if kind == "diffusion" else [(None, None)]
+    for sampler, steps in samplers:
+        t0 = time.perf_counter()
+        r = evaluate_pusht(policy, n_episodes=args.episodes, sampler=sampler, num_inference_steps=steps,
+                           dataset_meta=dataset_meta)
+        label = f"{kind} {sampler.upper()}-{steps}" if sampler else kind
+        print(f"{label}: score {r.score:.3f} +- {r.summary()['score_stderr']:.3f}, success {r.success_rate:.0%}, "
+              f"{summary['steps']} steps in {summary['seconds']:.0f} s, eval {time.perf_counter() - t0:.0f} s")
+
+
+def main(argv: list[str] | None = None) -> None:
+    args = parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(args.threads)
     load = os.getloadavg()[0]
@@ -206,14 +267,9 @@ def main(argv: list[str] | None = None) -> None:
         return
     dataset = load_or_collect(args.out / f"pusht_{args.demos}ep_seed0{noise_tag(args.action_noise)}.npz", args.demos, 0,
                               args.action_noise)
-    machine = f"this command ran with {args.threads} torch thread(s), load average {load:.1f} at its start"
     if args.only in (None, "throughput"):
-        for bs in sorted({256, args.batch_size}):
-            sps = throughput(dataset, args.threads, seconds=60.0, batch_size=bs, features=args.features)
-            print(f"training throughput, batch {bs}: {sps:.0f} samples/s")
-            rec(SECTION, f"training throughput (CPU default U-Net, batch {bs})", round(sps), "samples/s",
-                f"{COMMAND} --only throughput",
-                note=f"U-Net 64/128/256 (4.5 M params), full trainer step incl. EMA; 60 s after warm-up; {machine}")
+        part_throughput(args, dataset, rec, f"this command ran with {args.threads} torch thread(s), load average "
+                                            f"{load:.1f} at its start")
     if args.only == "throughput":
         return
 
@@ -225,45 +281,11 @@ def main(argv: list[str] | None = None) -> None:
     print(f"training {kinds} for {budget:g} min in all, plus evaluation on {args.episodes} episodes "
           f"(DDPM-100 costs ten times DDIM-10)")
     outs = {k: run_dir(k, args) for k in kinds}
-    if args.regression_steps == "match":
-        dp_dir = run_dir("diffusion", args)
-        if not (dp_dir / "config.json").is_file():
-            raise FileNotFoundError(f"--regression-steps match needs the diffusion checkpoint {str(dp_dir)!r}; "
-                                    f"train it first (--policies diffusion)")
-        args.regression_steps = int(read_checkpoint_info(dp_dir)["training"]["steps"])
-        print(f"regression baseline: {args.regression_steps} optimiser steps, as many as {dp_dir.name}")
-    elif args.regression_steps is not None:
-        args.regression_steps = int(args.regression_steps)
-    summaries = {}
-    if args.parallel and len(kinds) == 2:
-        # Both trainings at once, one torch thread (one core) each: half the wall-clock time.
-        one = argparse.Namespace(**{**vars(args), "threads": 1})
-        ctx = multiprocessing.get_context("spawn")
-        side = ctx.Process(target=train_policy, args=("regression", dataset, one, outs["regression"]))
-        side.start()
-        summaries["diffusion"] = train_policy("diffusion", dataset, one, outs["diffusion"])
-        side.join()
-        if side.exitcode != 0:
-            raise RuntimeError(f"the regression training process failed (exit code {side.exitcode})")
-        summaries["regression"] = read_checkpoint_info(outs["regression"])["training"]
+    resolve_regression_steps(args)
+    summaries = train_in_parallel(args, dataset, outs) if args.parallel and len(kinds) == 2 else {}
     for kind in kinds:
-        out = outs[kind]
-        summary = summaries.get(kind) or train_policy(kind, dataset, args, out)
-        summaries[kind] = summary
-        if args.ship:  # ship float16 weights (half the size) and evaluate exactly what is shipped
-            out = copy_checkpoint_half(out, SHIP[kind])
-        policy = load_checkpoint(out, device="cpu")
-        dataset_meta = read_checkpoint_info(out)["dataset"]
-        if args.ddim_spacing is not None and kind == "diffusion":
-            policy.config = dataclasses.replace(policy.config, ddim_timestep_spacing=args.ddim_spacing)
-        samplers = [("ddim", 10), ("ddpm", 100)] if kind == "diffusion" else [(None, None)]
-        for sampler, steps in samplers:
-            t0 = time.perf_counter()
-            r = evaluate_pusht(policy, n_episodes=args.episodes, sampler=sampler, num_inference_steps=steps,
-                               dataset_meta=dataset_meta)
-            label = f"{kind} {sampler.upper()}-{steps}" if sampler else kind
-            print(f"{label}: score {r.score:.3f} +- {r.summary()['score_stderr']:.3f}, success {r.success_rate:.0%}, "
-                  f"{summary['steps']} steps in {summary['seconds']:.0f} s, eval {time.perf_counter() - t0:.0f} s")
+        summary = summaries.get(kind) or train_policy(kind, dataset, args, outs[kind])
+        evaluate_trained(kind, outs[kind], summary, args)
 
     # Printed, not recorded: a minutes budget on one training seed is no protocol figure
     # (bench_chunk_ablation's step-budget curve over 3 training seeds is).
