@@ -125,7 +125,7 @@ def estimates(values: np.ndarray, success: np.ndarray | None = None):
     return mean_estimate(values), (rate_estimate(success.astype(bool)) if success is not None else None)
 
 
-def main(argv: list[str] | None = None) -> int:
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     add_protocol_args(parser)
     parser.add_argument("--policies", nargs="+", default=["dp_ddim10", "regression"], choices=sorted(POLICIES))
@@ -134,7 +134,51 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--commit-starts", type=int, default=16, help="two-way starts for the commitment part")
     parser.add_argument("--commit-samples", type=int, default=32, help="DP chunks sampled per start")
     parser.add_argument("--compare", type=Path, default=None, help="an earlier DDIM-10 per-episode json to check against")
-    args = parser.parse_args(argv)
+    return parser.parse_args(argv)
+
+
+def policy_rows(rec, name: str, data: dict, two: np.ndarray, seeds: list[int], parts: list[str]) -> None:
+    """Score, success and (with "hesitation") stalling rows of one policy, on all, two-way and other starts."""
+    label = POLICIES[name][2]
+    subsets = {"all starts": np.ones_like(two), "two-way starts": two, "other starts": ~two}
+    for subset, mask in subsets.items():
+        where = seed_range(seeds) + ("" if subset == "all starts" else f" ({subset.split()[0]} subset)")
+        if "subsets" in parts or "eval" in parts:
+            score, success = estimates(data["max_reward"][mask], data["success"][mask])
+            rec(f"{label} score, {subset}", score, "", f"mean of max reward; success {success}; {TRAINING}; "
+                f"{TRAINED[name]}", where)
+            rec(f"{label} success, {subset}", success, "", f"coverage > 0.95 within 300 steps; {TRAINING}; "
+                f"{TRAINED[name]}", where)
+        if "hesitation" in parts:
+            from coursekit.evaluate.behaviour import stalled_steps, still_steps
+            from coursekit.stats import rate_estimate
+
+            stall = stalled_steps(data["states"][mask], data["length"][mask])
+            rec(f"{label} steps stalled against the block, {subset}", estimates(stall.astype(float))[0], "steps",
+                "per episode: pusher within 3 px of the T, moving < 2 px/step, T still (< 0.5 px, 0.005 rad); "
+                f"mean of {np.mean(data['length'][mask]):.0f} steps per episode; {TRAINING}", where)
+            rec(f"{label} episodes with >= 20 steps stalled against the block, {subset}",
+                rate_estimate(stall >= 20), "", f"stalled as in the row above; {TRAINING}", where)
+            early = still_steps(data["states"][mask], data["length"][mask], first=40)
+            rec(f"{label} steps near-still in the first 40, {subset}", estimates(early.astype(float))[0], "steps",
+                f"pusher moving < 2 px/step anywhere (dithering at the fork would show here); {TRAINING}", where)
+
+
+def difference_rows(rec, results: dict[str, dict], two: np.ndarray, seeds: list[int]) -> None:
+    """Each DP head minus the chunked regressor, paired per seed, on two-way and other starts."""
+    if "regression" not in results:
+        return
+    for dp in [p for p in results if p.startswith("dp_")]:
+        diff = results[dp]["max_reward"] - results["regression"]["max_reward"]
+        for subset, mask in {"two-way starts": two, "other starts": ~two}.items():
+            rec(f"{POLICIES[dp][2]} minus chunked regression, {subset}", estimates(diff[mask])[0], "",
+                f"paired per seed, bootstrap over seeds; {TRAINING} each; NOT step-matched: "
+                f"{TRAINED[dp]}, regression {TRAINED['regression']}",
+                seed_range(seeds) + f" ({subset.split()[0]} subset)")
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
     seeds = protocol_seeds(args)
     args.out.mkdir(parents=True, exist_ok=True)
     flags = two_way_flags(seeds, write=not args.no_record)
@@ -164,38 +208,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.compare is not None and "dp_ddim10" in results:
         print(check_against(results["dp_ddim10"], args.compare))
     for name, data in results.items():
-        label = POLICIES[name][2]
-        subsets = {"all starts": np.ones_like(two), "two-way starts": two, "other starts": ~two}
-        for subset, mask in subsets.items():
-            where = seed_range(seeds) + ("" if subset == "all starts" else f" ({subset.split()[0]} subset)")
-            if "subsets" in args.parts or "eval" in args.parts:
-                score, success = estimates(data["max_reward"][mask], data["success"][mask])
-                rec(f"{label} score, {subset}", score, "", f"mean of max reward; success {success}; {TRAINING}; "
-                    f"{TRAINED[name]}", where)
-                rec(f"{label} success, {subset}", success, "", f"coverage > 0.95 within 300 steps; {TRAINING}; "
-                    f"{TRAINED[name]}", where)
-            if "hesitation" in args.parts:
-                from coursekit.evaluate.behaviour import stalled_steps, still_steps
-
-                stall = stalled_steps(data["states"][mask], data["length"][mask])
-                rec(f"{label} steps stalled against the block, {subset}", estimates(stall.astype(float))[0], "steps",
-                    "per episode: pusher within 3 px of the T, moving < 2 px/step, T still (< 0.5 px, 0.005 rad); "
-                    f"mean of {np.mean(data['length'][mask]):.0f} steps per episode; {TRAINING}", where)
-                rec(f"{label} episodes with >= 20 steps stalled against the block, {subset}",
-                    rate_estimate(stall >= 20), "", f"stalled as in the row above; {TRAINING}", where)
-                early = still_steps(data["states"][mask], data["length"][mask], first=40)
-                rec(f"{label} steps near-still in the first 40, {subset}", estimates(early.astype(float))[0], "steps",
-                    f"pusher moving < 2 px/step anywhere (dithering at the fork would show here); {TRAINING}", where)
+        policy_rows(rec, name, data, two, seeds, args.parts)
     if "subsets" in args.parts:
-        for dp in [p for p in results if p.startswith("dp_")]:
-            if "regression" not in results:
-                continue
-            diff = results[dp]["max_reward"] - results["regression"]["max_reward"]
-            for subset, mask in {"two-way starts": two, "other starts": ~two}.items():
-                rec(f"{POLICIES[dp][2]} minus chunked regression, {subset}", estimates(diff[mask])[0], "",
-                    f"paired per seed, bootstrap over seeds; {TRAINING} each; NOT step-matched: "
-                    f"{TRAINED[dp]}, regression {TRAINED['regression']}",
-                    seed_range(seeds) + f" ({subset.split()[0]} subset)")
+        difference_rows(rec, results, two, seeds)
     if "commitment" in args.parts:
         from benchmarks.claims_commitment import commitment
 
