@@ -43,6 +43,8 @@ from benchmarks.resumable import cache_dir
 SECTION = "Pixels (PushT): two-stage route"
 COMMAND = ".venv/bin/python -m benchmarks.bench_pixel_policy"
 CACHE = cache_dir("pixels")
+SHIPPED = Path(__file__).resolve().parents[1] / "coursekit" / "checkpoints" / "pusht_diffusion_pixels"
+"""Where ``--ship`` puts the two-stage pixel policy (never over an existing one)."""
 HELD_OUT = 40
 """The last episodes of the data set, never trained on by stage 1 (its keypoint error is measured there)."""
 
@@ -158,6 +160,25 @@ def part_policy(args: argparse.Namespace, record) -> None:
     record(SECTION, f"{label}: score", round(est.value, 3), "", cmd, interval=(round(est.lo, 3), round(est.hi, 3)),
            n=est.n, seeds=f"{seeds[0]}-{seeds[-1]}", note=note)
     record(SECTION, f"{label}: training throughput", round(training["samples_per_s"]), "samples/s", cmd, note=note)
+    if args.ship:
+        ship(run, seeds, dataset.meta, f"{cmd} --ship", note, record)
+
+
+def ship(run: Path, seeds: list[int], meta: dict, cmd: str, note: str, record) -> None:
+    """Copy ``run`` into the package as :data:`SHIPPED` (float16 weights, as every shipped checkpoint),
+    then score exactly what ships on ``seeds`` through the evaluation ``coursekit eval`` uses."""
+    from benchmarks.bench_chunk_ablation import evaluate_saved
+    from coursekit.checkpoint import copy_checkpoint_half, load_checkpoint
+    from coursekit.stats import mean_estimate
+
+    copy_checkpoint_half(run, SHIPPED)
+    saved = evaluate_saved(load_checkpoint(SHIPPED, device="cpu"), run / f"eval_shipped_{seeds[0]}_{len(seeds)}.json",
+                           seeds, meta, {})
+    est = mean_estimate(saved["max_reward"])
+    print(f"shipped {SHIPPED.name} (float16): {est.value:.3f} [{est.lo:.3f}, {est.hi:.3f}] (n={est.n})")
+    record(SECTION, "shipped pixel checkpoint score, DDIM-10 (notebook 12)", round(est.value, 3), "", cmd,
+           interval=(round(est.lo, 3), round(est.hi, 3)), n=est.n, seeds=f"{seeds[0]}-{seeds[-1]}",
+           note=f"coursekit/checkpoints/{SHIPPED.name}, float16 weights; success {np.mean(saved['success']):.3f}; {note}")
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -174,8 +195,14 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--episodes-limit", type=int, default=None, help="use the first N episodes (smoke runs)")
     parser.add_argument("--threads", type=int, default=1, help="torch threads")
     parser.add_argument("--out", type=Path, default=CACHE, help="trained encoders (never the repository)")
+    parser.add_argument("--ship", action="store_true",
+                        help=f"policy: copy the trained policy to {SHIPPED.relative_to(SHIPPED.parents[2])} (float16) "
+                             "and score what ships")
     parser.add_argument("--no-record", action="store_true", help="print only")
     args = parser.parse_args(argv)
+    if args.ship and (SHIPPED.exists() or "policy" not in args.only):
+        raise SystemExit(f"--ship needs --only policy and no {SHIPPED} (it is never overwritten: move it aside first)"
+                         if SHIPPED.exists() else "--ship needs --only policy")
     if not args.data.is_file():
         raise SystemExit(f"--data {args.data} does not exist (make it with: coursekit collect pusht --episodes 400 "
                          f"--seed 0 --action-noise 0,5 --out {args.data})")

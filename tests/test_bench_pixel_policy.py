@@ -1,4 +1,4 @@
-"""benchmarks/bench_pixel_policy.py: stage 1 measures its keypoint error on episodes it never trained on."""
+"""benchmarks/bench_pixel_policy.py: stage 1 measures its keypoint error on episodes it never trained on; --ship never overwrites."""
 
 from __future__ import annotations
 
@@ -67,3 +67,13 @@ def test_two_stage_policy_trains_on_the_frozen_stage1_encoder(demos, tmp_path, m
     for k, v in stage1.items():  # frozen: the policy's encoder is stage 1's, bit for bit (EMA of a constant)
         assert torch.equal(policy.vision_encoder.state_dict()[k].float(), v.float()), k
     assert not list(tmp_path.glob(".*.state.pt")), "the resume state outlived its run"
+    shipped = tmp_path / "pusht_diffusion_pixels"
+    monkeypatch.setattr(bpp, "SHIPPED", shipped)
+    bpp.main(["--only", "policy", "--policy-steps", "2", "--episodes", "1", "--episodes-limit", "3", "--ship", *common])
+    (section, row_name, *_), kw = rows[-1]
+    assert section == bpp.SECTION and row_name == "shipped pixel checkpoint score, DDIM-10 (notebook 12)" and kw["n"] == 1
+    from safetensors.torch import load_file
+
+    assert {t.dtype for t in load_file(shipped / "model.safetensors").values()} <= {torch.float16, torch.int64}
+    with pytest.raises(SystemExit, match="never overwritten"):  # checked before any work
+        bpp.main(["--only", "policy", "--policy-steps", "2", "--episodes", "1", "--ship", *common])
