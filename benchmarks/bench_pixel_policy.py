@@ -49,10 +49,20 @@ HELD_OUT = 40
 """The last episodes of the data set, never trained on by stage 1 (its keypoint error is measured there)."""
 
 
-def encoder_config():
+def encoder_config(random_crops: bool = True):
+    """The ``small`` preset; ``random_crops=False``: the same encoder without its augmentation."""
+    import dataclasses
+
     from coursekit.nn.vision import VisionEncoderConfig
 
-    return VisionEncoderConfig.preset("small")
+    return dataclasses.replace(VisionEncoderConfig.preset("small"), random_crops=random_crops)
+
+
+def variant(args: argparse.Namespace) -> tuple[str, str, str]:
+    """(file-name suffix, row-name suffix, command flag) of ``--no-random-crops``; empty without it."""
+    if args.random_crops:
+        return "", "", ""
+    return "_nocrops", " without random crops", " --no-random-crops"
 
 
 def frames_and_keypoints(data: Path, limit: int | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -84,7 +94,7 @@ def part_pretrain(args: argparse.Namespace, record) -> None:
     render_s = time.perf_counter() - t0
     held = episode >= episode.max() + 1 - HELD_OUT if args.episodes_limit is None else episode >= episode.max()
     torch.manual_seed(args.seed)
-    encoder = VisionEncoder(encoder_config())
+    encoder = VisionEncoder(encoder_config(args.random_crops))
     config = PretrainConfig(steps=args.pretrain_steps, batch_size=args.batch_size, seed=args.seed)
     t1 = time.perf_counter()
     out = pretrain_encoder(encoder, frames[~held], keypoints[~held], config)
@@ -99,19 +109,20 @@ def part_pretrain(args: argparse.Namespace, record) -> None:
     print(f"stage 1: {len(frames)} frames rendered in {render_s:.0f} s; {config.steps} steps in {train_s:.0f} s "
           f"({images_s:.0f} images/s); held-out keypoint error {est.value:.1f} px [{est.lo:.1f}, {est.hi:.1f}] "
           f"(median {np.median(per_frame):.1f}, n={est.n} frames of {len(np.unique(episode[held]))} episodes)")
-    path = args.out / f"encoder_pretrained_s{config.steps}_seed{args.seed}.pt"
+    path = args.out / f"encoder_pretrained_s{config.steps}_seed{args.seed}{variant(args)[0]}.pt"
     args.out.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:  # the cache stage 2 loads; a killed write leaves no half file
         torch.save({"encoder": encoder.state_dict(), "config": json.dumps(config_to_dict(encoder.config)),
                     "readout": out["readout"].state_dict(), "mean": out["mean"], "std": out["std"]}, tmp)
-    cmd = f"{COMMAND} --only pretrain --pretrain-steps {config.steps} --batch-size {config.batch_size} --threads {args.threads}"
+    cmd = (f"{COMMAND} --only pretrain --pretrain-steps {config.steps} --batch-size {config.batch_size} --threads "
+           f"{args.threads}{variant(args)[2]}")
     note = (f"8 block keypoints (world px, 512 px wide world), mean distance per frame over the frames of the last "
             f"{len(np.unique(episode[held]))} of {episode.max() + 1} demonstrations (never trained on); encoder 16-128 one block per stage, "
-            f"96x96 frames at 48x48, 42x42 crops; {config.steps} steps of batch {config.batch_size}, seed {args.seed}; "
+            f"96x96 frames at 48x48, 42x42 {'random' if args.random_crops else 'centre (no augmentation)'} crops; {config.steps} steps of batch {config.batch_size}, seed {args.seed}; "
             f"1-min load {os.getloadavg()[0]:.1f}")
-    record(SECTION, "stage 1: held-out block keypoint error", round(est.value, 2), "px", cmd,
+    record(SECTION, f"stage 1{variant(args)[1]}: held-out block keypoint error", round(est.value, 2), "px", cmd,
            interval=(round(est.lo, 2), round(est.hi, 2)), n=est.n, note=note)
-    record(SECTION, "stage 1: training throughput", round(images_s), "images/s", cmd,
+    record(SECTION, f"stage 1{variant(args)[1]}: training throughput", round(images_s), "images/s", cmd,
            note=f"{train_s:.0f} s for {config.steps} steps on {torch.get_num_threads()} thread(s); {note}")
 
 
@@ -123,9 +134,9 @@ def _pixel_policy(args: argparse.Namespace, dataset):
     from coursekit.policies import make_policy
 
     policy, batches, recipe = make_policy("diffusion", dataset, features="pusht_image", recipe="cpu", seed=args.seed,
-                                          vision=encoder_config())
+                                          vision=encoder_config(args.random_crops))
     if args.route == "two-stage":
-        path = args.out / f"encoder_pretrained_s{args.pretrain_steps}_seed{args.seed}.pt"
+        path = args.out / f"encoder_pretrained_s{args.pretrain_steps}_seed{args.seed}{variant(args)[0]}.pt"
         if not path.is_file():
             raise SystemExit(f"no stage-1 encoder {path}: run --only pretrain --pretrain-steps {args.pretrain_steps} first")
         policy.vision_encoder.load_state_dict(torch.load(path, weights_only=False)["encoder"])
@@ -140,7 +151,8 @@ def part_policy(args: argparse.Namespace, record) -> None:
     from coursekit.data.episodes import EpisodeDataset
     from coursekit.stats import mean_estimate
 
-    run = args.out / f"dp_{args.route}_p{args.pretrain_steps if args.route == 'two-stage' else 0}_s{args.policy_steps}_seed{args.seed}"
+    run = args.out / (f"dp_{args.route}_p{args.pretrain_steps if args.route == 'two-stage' else 0}_s{args.policy_steps}"
+                      f"_seed{args.seed}{variant(args)[0]}")
     dataset = EpisodeDataset.load(args.data)
     policy = load_or_train(run, lambda: _pixel_policy(args, dataset), args.policy_steps, args.seed, args.threads,
                            dataset.meta)
@@ -148,11 +160,11 @@ def part_policy(args: argparse.Namespace, record) -> None:
     seeds = list(range(100_000, 100_000 + args.episodes))
     saved = evaluate_saved(policy, run / f"eval_{seeds[0]}_{len(seeds)}.json", seeds, dataset.meta, {})
     est = mean_estimate(saved["max_reward"])
-    label = f"DP from pixels, {args.route}"
+    label = f"DP from pixels, {args.route}{variant(args)[1]}"
     print(f"{label}: {est.value:.3f} [{est.lo:.3f}, {est.hi:.3f}] (n={est.n}); trained {training['steps']} steps in "
           f"{training['seconds'] / 60:.0f} min ({training['samples_per_s']:.0f} samples/s)")
     cmd = (f"{COMMAND} --only policy --route {args.route} --policy-steps {args.policy_steps} --pretrain-steps "
-           f"{args.pretrain_steps} --threads {args.threads} --seed {args.seed}")
+           f"{args.pretrain_steps} --threads {args.threads} --seed {args.seed}{variant(args)[2]}")
     note = (f"To = 2 frames of 96x96 + pusher position, DDIM-10, Ta = 8; {training['steps']} steps of batch "
             f"{training['train_config']['batch_size']} in {training['seconds'] / 60:.0f} min on {args.threads} thread(s)"
             f"{' after stage 1 (' + str(args.pretrain_steps) + ' steps, encoder frozen)' if args.route == 'two-stage' else ''}; "
@@ -195,6 +207,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--episodes-limit", type=int, default=None, help="use the first N episodes (smoke runs)")
     parser.add_argument("--threads", type=int, default=1, help="torch threads")
     parser.add_argument("--out", type=Path, default=CACHE, help="trained encoders (never the repository)")
+    parser.add_argument("--no-random-crops", dest="random_crops", action="store_false",
+                        help="train the encoder on the centre crop (no augmentation): what the crops buy")
     parser.add_argument("--ship", action="store_true",
                         help=f"policy: copy the trained policy to {SHIPPED.relative_to(SHIPPED.parents[2])} (float16) "
                              "and score what ships")

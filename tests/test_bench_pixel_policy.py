@@ -43,6 +43,12 @@ def test_pretrain_rows_are_measured_on_the_held_out_episode(demos, tmp_path, mon
     assert err_kw["n"] == int(np.sum(episode == 2)) and err_kw["interval"][0] <= err[2] <= err_kw["interval"][1]
     assert speed[3] == "images/s" and speed[2] > 0
     assert [p.name for p in tmp_path.iterdir()] == ["encoder_pretrained_s2_seed0.pt"]
+    bpp.main(["--only", "pretrain", "--pretrain-steps", "2", "--batch-size", "8", "--episodes-limit", "3",
+              "--data", str(demos), "--out", str(tmp_path), "--no-random-crops"])  # the augmentation off: its own rows
+    (plain, plain_kw), _ = rows[2:]
+    assert plain[1] == "stage 1 without random crops: held-out block keypoint error"
+    assert plain[4].endswith("--no-random-crops") and "centre (no augmentation) crops" in plain_kw["note"]
+    assert (tmp_path / "encoder_pretrained_s2_seed0_nocrops.pt").is_file()
 
 
 @pytest.mark.slow

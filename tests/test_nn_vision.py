@@ -39,6 +39,21 @@ def test_eval_is_deterministic_train_crop_is_seeded():
     torch.testing.assert_close(a, enc(x, generator=torch.Generator().manual_seed(5)))
 
 
+def test_without_random_crops_training_sees_the_centre_crop():
+    import dataclasses
+
+    torch.manual_seed(0)
+    enc = VisionEncoder(dataclasses.replace(TINY, random_crops=False))
+    x = torch.rand(3, 3, 96, 96) * 2 - 1
+    train = enc.train()(x, generator=torch.Generator().manual_seed(5))
+    torch.testing.assert_close(train, enc.eval()(x))  # GroupNorm: no train/eval difference but the crop
+    augmented = VisionEncoder(TINY)
+    augmented.load_state_dict(enc.state_dict())
+    assert not torch.allclose(augmented.train()(x, generator=torch.Generator().manual_seed(5)), train)
+    with pytest.raises(ValueError, match="random_crops must be True or False, got 'no'"):
+        VisionEncoderConfig(random_crops="no")
+
+
 def test_crops_against_slicing():
     x = torch.arange(2 * 1 * 6 * 6, dtype=torch.float32).reshape(2, 1, 6, 6)
     torch.testing.assert_close(center_crop(x, 4), x[..., 1:5, 1:5])

@@ -43,6 +43,9 @@ class VisionEncoderConfig:
     frames are ``image_size``. Departure: Diffusion Policy encodes its 96x96 frames at full size."""
     crop_size: tuple[int, int] = (84, 84)
     """Crop (h, w): random in train(), centred in eval(); equal to image_size for no crop."""
+    random_crops: bool = True
+    """The augmentation: a random crop in train(). False: the centre crop in train() too (the same
+    input size, no augmentation; chapter 12 measures what the crops buy)."""
     widths: tuple[int, ...] = (32, 64, 128, 256)
     """Channels of the four residual stages (ResNet-18: 64, 128, 256, 512)."""
     blocks_per_stage: int = 2
@@ -68,6 +71,8 @@ class VisionEncoderConfig:
         if not self.widths or any(not isinstance(w, int) or w < self.group_size or w % self.group_size
                                   for w in self.widths):
             raise ValueError(f"widths must be multiples of group_size={self.group_size}, got {self.widths!r}")
+        if not isinstance(self.random_crops, bool):
+            raise ValueError(f"random_crops must be True or False, got {self.random_crops!r}")
         for name in ("in_channels", "blocks_per_stage", "group_size", "num_keypoints", "feature_dim"):
             v = getattr(self, name)
             if not isinstance(v, int) or v < 1:
@@ -229,7 +234,7 @@ class VisionEncoder(nn.Module):
         if cfg.input_size != cfg.image_size:
             images = F.interpolate(images, size=cfg.image_size, mode="area")  # (B, C, *image_size)
         if cfg.crop_size != cfg.image_size:
-            images = random_crop(images, cfg.crop_size, generator) if self.training \
+            images = random_crop(images, cfg.crop_size, generator) if self.training and cfg.random_crops \
                 else center_crop(images, cfg.crop_size)  # (B, C, h, w)
         x = self.stages(self.stem(images))  # (B, widths[-1], h', w')
         return self.pool(x), tuple(x.shape[-2:])
