@@ -81,49 +81,69 @@ def frames_and_keypoints(data: Path, limit: int | None) -> tuple[np.ndarray, np.
     return arrays["image"], keypoints.astype(np.float32), episode
 
 
-def part_pretrain(args: argparse.Namespace, record) -> None:
+def stage1(args: argparse.Namespace, frames: np.ndarray, keypoints: np.ndarray, path: Path):
+    """Stage 1 trained on ``frames`` -> ``keypoints`` and saved at ``path``, or loaded from it when a
+    run with these arguments finished before: (encoder, {"readout", "mean", "std"}, training seconds)."""
     import torch
+    from torch import nn
 
     from coursekit.atomic import atomic_path
     from coursekit.config import config_to_dict
     from coursekit.nn.vision import VisionEncoder
-    from coursekit.nn.vision_pretrain import PretrainConfig, predict_targets, pretrain_encoder
+    from coursekit.nn.vision_pretrain import PretrainConfig, pretrain_encoder
+
+    torch.manual_seed(args.seed)
+    encoder = VisionEncoder(encoder_config(args.random_crops))
+    if path.is_file():  # finished before (e.g. by a --no-record run): measure it again, do not retrain
+        saved = torch.load(path, weights_only=False)
+        encoder.load_state_dict(saved["encoder"])
+        readout = nn.Linear(encoder.config.feature_dim, keypoints.shape[1])
+        readout.load_state_dict(saved["readout"])
+        print(f"stage 1: loaded {path}")
+        return encoder, {"readout": readout, "mean": saved["mean"], "std": saved["std"]}, saved["seconds"]
+    config = PretrainConfig(steps=args.pretrain_steps, batch_size=args.batch_size, seed=args.seed)
+    t0 = time.perf_counter()
+    out = pretrain_encoder(encoder, frames, keypoints, config)
+    seconds = time.perf_counter() - t0
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:  # the cache stage 2 loads; a killed write leaves no half file
+        torch.save({"encoder": encoder.state_dict(), "config": json.dumps(config_to_dict(encoder.config)),
+                    "readout": out["readout"].state_dict(), "mean": out["mean"], "std": out["std"],
+                    "seconds": seconds}, tmp)
+    return encoder, out, seconds
+
+
+def part_pretrain(args: argparse.Namespace, record) -> None:
+    import torch
+
+    from coursekit.nn.vision_pretrain import predict_targets
+    from coursekit.stats import mean_estimate
 
     t0 = time.perf_counter()
     frames, keypoints, episode = frames_and_keypoints(args.data, args.episodes_limit)
     render_s = time.perf_counter() - t0
     held = episode >= episode.max() + 1 - HELD_OUT if args.episodes_limit is None else episode >= episode.max()
-    torch.manual_seed(args.seed)
-    encoder = VisionEncoder(encoder_config(args.random_crops))
-    config = PretrainConfig(steps=args.pretrain_steps, batch_size=args.batch_size, seed=args.seed)
-    t1 = time.perf_counter()
-    out = pretrain_encoder(encoder, frames[~held], keypoints[~held], config)
-    train_s = time.perf_counter() - t1
+    path = args.out / f"encoder_pretrained_s{args.pretrain_steps}_seed{args.seed}{variant(args)[0]}.pt"
+    encoder, out, train_s = stage1(args, frames[~held], keypoints[~held], path)
     pred = predict_targets(encoder, out["readout"], out["mean"], out["std"], frames[held])  # (n, 2K)
     err = np.linalg.norm((pred - keypoints[held]).reshape(len(pred), -1, 2), axis=-1)  # (n, K) world px
     per_frame = err.mean(1)  # (n,)
-    from coursekit.stats import mean_estimate
-
     est = mean_estimate(per_frame)
-    images_s = config.steps * config.batch_size / train_s
-    print(f"stage 1: {len(frames)} frames rendered in {render_s:.0f} s; {config.steps} steps in {train_s:.0f} s "
+    images_s = args.pretrain_steps * args.batch_size / train_s
+    print(f"stage 1: {len(frames)} frames rendered in {render_s:.0f} s; {args.pretrain_steps} steps in {train_s:.0f} s "
           f"({images_s:.0f} images/s); held-out keypoint error {est.value:.1f} px [{est.lo:.1f}, {est.hi:.1f}] "
           f"(median {np.median(per_frame):.1f}, n={est.n} frames of {len(np.unique(episode[held]))} episodes)")
-    path = args.out / f"encoder_pretrained_s{config.steps}_seed{args.seed}{variant(args)[0]}.pt"
-    args.out.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp:  # the cache stage 2 loads; a killed write leaves no half file
-        torch.save({"encoder": encoder.state_dict(), "config": json.dumps(config_to_dict(encoder.config)),
-                    "readout": out["readout"].state_dict(), "mean": out["mean"], "std": out["std"]}, tmp)
-    cmd = (f"{COMMAND} --only pretrain --pretrain-steps {config.steps} --batch-size {config.batch_size} --threads "
+    cmd = (f"{COMMAND} --only pretrain --pretrain-steps {args.pretrain_steps} --batch-size {args.batch_size} --threads "
            f"{args.threads}{variant(args)[2]}")
     note = (f"8 block keypoints (world px, 512 px wide world), mean distance per frame over the frames of the last "
-            f"{len(np.unique(episode[held]))} of {episode.max() + 1} demonstrations (never trained on); encoder 16-128 one block per stage, "
-            f"96x96 frames at 48x48, 42x42 {'random' if args.random_crops else 'centre (no augmentation)'} crops; {config.steps} steps of batch {config.batch_size}, seed {args.seed}; "
-            f"1-min load {os.getloadavg()[0]:.1f}")
+            f"{len(np.unique(episode[held]))} of {episode.max() + 1} demonstrations (never trained on); encoder 16-128 "
+            f"one block per stage, 96x96 frames at 48x48, 42x42 "
+            f"{'random' if args.random_crops else 'centre (no augmentation)'} crops; {args.pretrain_steps} steps of "
+            f"batch {args.batch_size}, seed {args.seed}; 1-min load {os.getloadavg()[0]:.1f}")
     record(SECTION, f"stage 1{variant(args)[1]}: held-out block keypoint error", round(est.value, 2), "px", cmd,
            interval=(round(est.lo, 2), round(est.hi, 2)), n=est.n, note=note)
     record(SECTION, f"stage 1{variant(args)[1]}: training throughput", round(images_s), "images/s", cmd,
-           note=f"{train_s:.0f} s for {config.steps} steps on {torch.get_num_threads()} thread(s); {note}")
+           note=f"{train_s:.0f} s for {args.pretrain_steps} steps on {torch.get_num_threads()} thread(s); {note}")
 
 
 def _pixel_policy(args: argparse.Namespace, dataset):

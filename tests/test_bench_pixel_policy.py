@@ -49,6 +49,11 @@ def test_pretrain_rows_are_measured_on_the_held_out_episode(demos, tmp_path, mon
     assert plain[1] == "stage 1 without random crops: held-out block keypoint error"
     assert plain[4].endswith("--no-random-crops") and "centre (no augmentation) crops" in plain_kw["note"]
     assert (tmp_path / "encoder_pretrained_s2_seed0_nocrops.pt").is_file()
+    mtime = (tmp_path / "encoder_pretrained_s2_seed0.pt").stat().st_mtime_ns
+    bpp.main(["--only", "pretrain", "--pretrain-steps", "2", "--batch-size", "8", "--episodes-limit", "3",
+              "--data", str(demos), "--out", str(tmp_path)])  # finished before: loaded and measured, not retrained
+    assert (tmp_path / "encoder_pretrained_s2_seed0.pt").stat().st_mtime_ns == mtime
+    assert rows[4][0][2] == err[2] and rows[5][0][2] == speed[2]  # the same rows again
 
 
 @pytest.mark.slow
