@@ -1,0 +1,124 @@
+"""The long benchmarks as two queues, one per core: run them in pieces, on any day, until they are done.
+
+    .venv/bin/python -m benchmarks.long_runs a          # core 1: the budget curve, then person-like data
+    .venv/bin/python -m benchmarks.long_runs b          # core 2: RTC in its regime, the pixel policy, ACT's k sweep
+    .venv/bin/python -m benchmarks.long_runs a --list   # the queue, one command per line
+
+Every step is a command of a resumable benchmark (``benchmarks/resumable.py``): a finished run is
+loaded from ``~/.cache/coursekit`` and an unfinished one continues where it stopped, so stopping a
+queue and starting it again costs at most a minute per core, and a queue run to the end twice
+trains nothing the second time. A ``train`` step trains one run (one variant, one training seed)
+and writes no row: a row over fewer training seeds than its benchmark names would be wrong in the
+table until the others are in. The ``record`` step after them writes the rows from the cache, and a
+``rows`` step is a benchmark whose one command is complete (an RTC sweep for one head, a pixel
+stage). ``--no-record`` (a queue run from a second working tree while the first is being edited)
+skips the record steps and passes ``--no-record`` to the rows steps; the same queue run later
+without it records everything from the cache in seconds. Shipping the pixel policy is a decision,
+not a step: once its row is in, ``bench_pixel_policy --only policy --route two-stage --ship``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from benchmarks.resumable import cache_dir
+
+DATA = cache_dir("data") / "pusht_400ep_seed0_noise0-5.npz"
+PERSON = cache_dir("data") / "pusht_400ep_seed0_noise0-5_person.npz"
+SEEDS = (0, 1, 2)
+PIXEL_STEPS_END_TO_END = 17700
+"""The end-to-end pixel run's steps at the two-stage route's CPU budget: stage 1 (3000 steps, about
+610 s) plus 19259 frozen-encoder steps at 387 samples/s of batch 128 (about 6370 s), divided by an
+end-to-end step at 325 samples/s (0.39 s): the throughput rows of ``bench_pixels``."""
+
+
+def ablation(variants: list[str], steps: int, seeds, data: Path) -> list[str]:
+    return ["bench_chunk_ablation", "--only", "train", "--steps", str(steps), "--train-seeds", *map(str, seeds),
+            "--variants", *variants, "--threads", "1", "--data", str(data), "--name-budget"]
+
+
+def queue_a() -> list[tuple[str, list[str]]]:
+    """Issue 24's PushT runs: the budget curve at 20 000 steps, then the heads on person-like data."""
+    heads, person = ["Diffusion Policy", "chunked regression"], ["Diffusion Policy", "chunked regression", "single-step"]
+    steps: list[tuple[str, list[str]]] = [("data", ["collect", str(DATA), ""]), ("data", ["collect", str(PERSON), "person"])]
+    steps += [("train", ablation([v], 20000, [s], DATA)) for v in heads for s in SEEDS]
+    steps += [("record", ablation(heads, 20000, SEEDS, DATA))]
+    steps += [("train", ablation([v], 6000, [s], PERSON)) for v in person for s in SEEDS]
+    steps += [("record", ablation(person, 6000, SEEDS, PERSON))]
+    return steps
+
+
+def queue_b() -> list[tuple[str, list[str]]]:
+    """Issues 25, 26 and 24 (item 3): RTC in its regime, the Tp = 32 head, the pixel policy, ACT's k sweep."""
+    rtc = ["bench_rtc_regime", "--strategies", "rtc,async"]
+    pixels = ["bench_pixel_policy", "--threads", "1", "--pretrain-steps", "3000", "--data", str(DATA)]
+    steps = [("rows", [*rtc, "--heads", "dp", "--d", "1"]), ("rows", [*rtc, "--heads", "flow", "--d", "2,1"]),
+             ("head", ["train_head", "flow-tp32", "--data", str(DATA), "--no-progress"]),
+             ("rows", [*rtc, "--heads", "flow-tp32", "--d", "4,6,8"]),
+             ("rows", [*pixels, "--only", "pretrain"]), ("rows", [*pixels, "--only", "pretrain", "--no-random-crops"]),
+             ("rows", [*pixels, "--only", "policy", "--route", "two-stage", "--policy-steps", "19259"]),
+             ("rows", [*pixels, "--only", "policy", "--route", "end-to-end", "--policy-steps",
+                       str(PIXEL_STEPS_END_TO_END)])]
+    act = ["bench_act_chunks", "--steps", "7000", "--threads", "1"]
+    steps += [("train", [*act, "--train-seeds", str(s)]) for s in SEEDS]
+    steps += [("record", [*act, "--train-seeds", *map(str, SEEDS)])]
+    return steps
+
+
+QUEUES = {"a": queue_a, "b": queue_b}
+SKIPPED = {"data": lambda step: f"{step[1]} exists", "head": lambda step: f"head {step[1]} is trained",
+           "record": lambda step: f"{step[0]}: recording skipped (--no-record)"}
+"""Why a step of each kind that can be skipped was, for the log."""
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def command(kind: str, args: list[str], no_record: bool) -> list[str] | None:
+    """The argv of one step, or None when it has nothing to do (a data set made, a head trained)."""
+    if kind == "data":
+        out, style = Path(args[1]), args[2]
+        if out.is_file():
+            return None
+        return ["coursekit", "collect", "pusht", "--episodes", "400", "--seed", "0", "--action-noise", "0,5",
+                *(["--style", style] if style else []), "--out", str(out)]
+    if kind == "head":
+        from benchmarks.resumable import is_trained
+        from benchmarks.train_head import HEADS, TRAINED_HEADS
+
+        if is_trained(TRAINED_HEADS / HEADS[args[1]]["dir"]):
+            return None
+    if kind == "record" and no_record:
+        return None
+    tail = ["--no-record"] if kind == "train" or (no_record and kind == "rows") else []
+    return [sys.executable, "-m", f"benchmarks.{args[0]}", *args[1:], *tail]
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("queue", choices=sorted(QUEUES), help="a: issue 24's PushT runs; b: RTC, pixels, ACT's k sweep")
+    parser.add_argument("--list", action="store_true", help="print the queue's commands and stop")
+    parser.add_argument("--no-record", action="store_true", help="write no rows (record steps are skipped)")
+    args = parser.parse_args(argv)
+    steps = QUEUES[args.queue]()
+    for i, (kind, step) in enumerate(steps, 1):
+        cmd = command(kind, step, args.no_record)
+        line = f"[{args.queue} {i}/{len(steps)}] {shlex.join(cmd) if cmd else SKIPPED[kind](step)}"
+        print(line, flush=True)
+        if cmd is None or args.list:
+            continue
+        if cmd[0] == "coursekit":
+            cmd = [str(Path(sys.executable).with_name("coursekit")), *cmd[1:]]
+        start = time.perf_counter()
+        rc = subprocess.call(cmd, cwd=ROOT)
+        print(f"[{args.queue} {i}/{len(steps)}] exit {rc} after {time.perf_counter() - start:.0f} s", flush=True)
+        if rc != 0:
+            return rc
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
