@@ -65,6 +65,12 @@ def variant(args: argparse.Namespace) -> tuple[str, str, str]:
     return "_nocrops", " without random crops", " --no-random-crops"
 
 
+def stage1_path(args: argparse.Namespace) -> Path:
+    """Stage 1's encoder file under ``--out``: named by every argument that changes it."""
+    return args.out / (f"encoder_pretrained_s{args.pretrain_steps}_b{args.batch_size}_seed{args.seed}"
+                       f"{variant(args)[0]}.pt")
+
+
 def frames_and_keypoints(data: Path, limit: int | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(N, 3, 96, 96) uint8 frames, (N, 16) block keypoints in world px, (N,) episode index."""
     from coursekit.data.episodes import EpisodeDataset
@@ -123,8 +129,7 @@ def part_pretrain(args: argparse.Namespace, record) -> None:
     frames, keypoints, episode = frames_and_keypoints(args.data, args.episodes_limit)
     render_s = time.perf_counter() - t0
     held = episode >= episode.max() + 1 - HELD_OUT if args.episodes_limit is None else episode >= episode.max()
-    path = args.out / f"encoder_pretrained_s{args.pretrain_steps}_seed{args.seed}{variant(args)[0]}.pt"
-    encoder, out, train_s = stage1(args, frames[~held], keypoints[~held], path)
+    encoder, out, train_s = stage1(args, frames[~held], keypoints[~held], stage1_path(args))
     pred = predict_targets(encoder, out["readout"], out["mean"], out["std"], frames[held])  # (n, 2K)
     err = np.linalg.norm((pred - keypoints[held]).reshape(len(pred), -1, 2), axis=-1)  # (n, K) world px
     per_frame = err.mean(1)  # (n,)
@@ -156,7 +161,7 @@ def _pixel_policy(args: argparse.Namespace, dataset):
     policy, batches, recipe = make_policy("diffusion", dataset, features="pusht_image", recipe="cpu", seed=args.seed,
                                           vision=encoder_config(args.random_crops))
     if args.route == "two-stage":
-        path = args.out / f"encoder_pretrained_s{args.pretrain_steps}_seed{args.seed}{variant(args)[0]}.pt"
+        path = stage1_path(args)
         if not path.is_file():
             raise SystemExit(f"no stage-1 encoder {path}: run --only pretrain --pretrain-steps {args.pretrain_steps} first")
         policy.vision_encoder.load_state_dict(torch.load(path, weights_only=False)["encoder"])

@@ -42,17 +42,17 @@ def test_pretrain_rows_are_measured_on_the_held_out_episode(demos, tmp_path, mon
     assert err[1] == "stage 1: held-out block keypoint error" and err[3] == "px"
     assert err_kw["n"] == int(np.sum(episode == 2)) and err_kw["interval"][0] <= err[2] <= err_kw["interval"][1]
     assert speed[3] == "images/s" and speed[2] > 0
-    assert [p.name for p in tmp_path.iterdir()] == ["encoder_pretrained_s2_seed0.pt"]
+    assert [p.name for p in tmp_path.iterdir()] == ["encoder_pretrained_s2_b8_seed0.pt"]
     bpp.main(["--only", "pretrain", "--pretrain-steps", "2", "--batch-size", "8", "--episodes-limit", "3",
               "--data", str(demos), "--out", str(tmp_path), "--no-random-crops"])  # the augmentation off: its own rows
     (plain, plain_kw), _ = rows[2:]
     assert plain[1] == "stage 1 without random crops: held-out block keypoint error"
     assert plain[4].endswith("--no-random-crops") and "centre (no augmentation) crops" in plain_kw["note"]
-    assert (tmp_path / "encoder_pretrained_s2_seed0_nocrops.pt").is_file()
-    mtime = (tmp_path / "encoder_pretrained_s2_seed0.pt").stat().st_mtime_ns
+    assert (tmp_path / "encoder_pretrained_s2_b8_seed0_nocrops.pt").is_file()
+    mtime = (tmp_path / "encoder_pretrained_s2_b8_seed0.pt").stat().st_mtime_ns
     bpp.main(["--only", "pretrain", "--pretrain-steps", "2", "--batch-size", "8", "--episodes-limit", "3",
               "--data", str(demos), "--out", str(tmp_path)])  # finished before: loaded and measured, not retrained
-    assert (tmp_path / "encoder_pretrained_s2_seed0.pt").stat().st_mtime_ns == mtime
+    assert (tmp_path / "encoder_pretrained_s2_b8_seed0.pt").stat().st_mtime_ns == mtime
     assert rows[4][0][2] == err[2] and rows[5][0][2] == speed[2]  # the same rows again
 
 
@@ -73,7 +73,7 @@ def test_two_stage_policy_trains_on_the_frozen_stage1_encoder(demos, tmp_path, m
     score, speed = rows[2:]
     assert score[0][1] == "DP from pixels, two-stage: score" and score[1]["n"] == 1
     assert speed[0][3] == "samples/s"
-    stage1 = torch.load(tmp_path / "encoder_pretrained_s2_seed0.pt", weights_only=False)["encoder"]
+    stage1 = torch.load(tmp_path / "encoder_pretrained_s2_b8_seed0.pt", weights_only=False)["encoder"]
     policy = load_checkpoint(tmp_path / "dp_two-stage_p2_s2_seed0", device="cpu")
     for k, v in stage1.items():  # frozen: the policy's encoder is stage 1's, bit for bit (EMA of a constant)
         assert torch.equal(policy.vision_encoder.state_dict()[k].float(), v.float()), k
