@@ -106,16 +106,18 @@ def stage1(args: argparse.Namespace, frames: np.ndarray, keypoints: np.ndarray, 
         readout = nn.Linear(encoder.config.feature_dim, keypoints.shape[1])
         readout.load_state_dict(saved["readout"])
         print(f"stage 1: loaded {path}")
-        return encoder, {"readout": readout, "mean": saved["mean"], "std": saved["std"]}, saved["seconds"]
+        return encoder, {"readout": readout, "mean": saved["mean"], "std": saved["std"], "load": saved.get("load")}, \
+            saved["seconds"]
     config = PretrainConfig(steps=args.pretrain_steps, batch_size=args.batch_size, seed=args.seed)
     t0 = time.perf_counter()
     out = pretrain_encoder(encoder, frames, keypoints, config)
     seconds = time.perf_counter() - t0
+    out["load"] = os.getloadavg()[0]  # how busy the machine was as it trained: the throughput depends on it
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:  # the cache stage 2 loads; a killed write leaves no half file
         torch.save({"encoder": encoder.state_dict(), "config": json.dumps(config_to_dict(encoder.config)),
                     "readout": out["readout"].state_dict(), "mean": out["mean"], "std": out["std"],
-                    "seconds": seconds}, tmp)
+                    "seconds": seconds, "load": out["load"]}, tmp)
     return encoder, out, seconds
 
 
@@ -144,7 +146,9 @@ def part_pretrain(args: argparse.Namespace, record) -> None:
             f"{len(np.unique(episode[held]))} of {episode.max() + 1} demonstrations (never trained on); encoder 16-128 "
             f"one block per stage, 96x96 frames at 48x48, 42x42 "
             f"{'random' if args.random_crops else 'centre (no augmentation)'} crops; {args.pretrain_steps} steps of "
-            f"batch {args.batch_size}, seed {args.seed}; 1-min load {os.getloadavg()[0]:.1f}")
+            f"batch {args.batch_size}, seed {args.seed}; "
+            + (f"1-min load {out['load']:.1f} at the end of training" if out.get("load") is not None
+               else "load during training not recorded"))
     record(SECTION, f"stage 1{variant(args)[1]}: held-out block keypoint error", round(est.value, 2), "px", cmd,
            interval=(round(est.lo, 2), round(est.hi, 2)), n=est.n, note=note)
     record(SECTION, f"stage 1{variant(args)[1]}: training throughput", round(images_s), "images/s", cmd,
