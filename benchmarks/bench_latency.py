@@ -127,14 +127,16 @@ def part_latency(args: argparse.Namespace) -> None:
                 f"average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; d = ceil(latency x rate): "
                 f"{d10} at 10 Hz (PushT), {d50} at 50 Hz (arm pair)")
         print(f"{label}: {ms:.1f} ms per chunk, {per_action:.2f} ms per action, d = {d10} at 10 Hz, {d50} at 50 Hz")
-        record(SECTION, f"{label}: ms per chunk", round(ms, 1), "ms", f"{COMMAND} --only latency", note=note)
-        record(SECTION, f"{label}: ms per action (own executor)", round(per_action, 2), "ms",
-               f"{COMMAND} --only latency", note=note)
+        cmd = f"{COMMAND} --only latency --heads {name} --repeats {args.repeats} --threads {args.threads}"
+        rows = [(f"{label}: ms per chunk", round(ms, 1), note), (f"{label}: ms per action (own executor)",
+                                                                round(per_action, 2), note)]
         if hasattr(policy, "predict_inpainted"):  # an iterative sampler RTC can guide
             g = chunk_latency_ms(policy, task, sampling=sampling, repeats=args.repeats, guided=True)
             print(f"{label} RTC-guided: {g:.1f} ms per chunk ({g / ms:.1f}x)")
-            record(SECTION, f"{label}: ms per RTC-guided chunk", round(g, 1), "ms", f"{COMMAND} --only latency",
-                   note=f"guidance adds a backward pass per step ({g / ms:.1f}x the plain chunk); " + note)
+            rows.append((f"{label}: ms per RTC-guided chunk", round(g, 1),
+                         f"guidance adds a backward pass per step ({g / ms:.1f}x the plain chunk); " + note))
+        for row, value, row_note in ([] if args.no_record else rows):
+            record(SECTION, row, value, "ms", cmd, note=row_note)
 
 
 def _threads() -> int:
@@ -266,7 +268,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--max-guidance", type=float, default=5.0, help="RTC's guidance clip beta (paper: 5)")
     parser.add_argument("--prefix", choices=["guide", "replace"], default="guide",
                         help="RTC's frozen prefix: guided (the paper) or also replaced at every step (DP inpainting)")
-    parser.add_argument("--repeats", type=int, default=7, help="latency: timed calls per head (median)")
+    parser.add_argument("--repeats", type=int, default=25,
+                        help="latency: timed calls per head (median; 25 is steadier than 7 on a shared machine)")
+    parser.add_argument("--no-record", action="store_true",
+                        help="latency: print only (to see the run-to-run spread without touching the rows)")
     parser.add_argument("--threads", type=int, default=1, help="torch threads")
     parser.add_argument("--cache", default=os.path.join(os.environ.get("XDG_CACHE_HOME", "~/.cache"), "coursekit",
                                                         "bench_latency"), help="where evaluated blocks are kept")
