@@ -1,7 +1,7 @@
 """The long benchmarks as two queues, one per core: run them in pieces, on any day, until they are done.
 
     .venv/bin/python -m benchmarks.long_runs a          # core 1: the budget curve, then person-like data
-    .venv/bin/python -m benchmarks.long_runs b          # core 2: RTC in its regime, the pixel policy, ACT's k sweep
+    .venv/bin/python -m benchmarks.long_runs b          # core 2: RTC in its regime, ACT's k sweep, the pixel policy
     .venv/bin/python -m benchmarks.long_runs a --list   # the queue, one command per line
 
 Every step is a command of a resumable benchmark (``benchmarks/resumable.py``): a finished run is
@@ -54,19 +54,19 @@ def queue_a() -> list[tuple[str, list[str]]]:
 
 
 def queue_b() -> list[tuple[str, list[str]]]:
-    """Issues 25, 26 and 24 (item 3): RTC in its regime, the Tp = 32 head, the pixel policy, ACT's k sweep."""
+    """Issues 25, 24 (item 3) and 26: RTC in its regime and the Tp = 32 head, ACT's k sweep, the pixel policy."""
     rtc = ["bench_rtc_regime", "--strategies", "rtc,async"]
     pixels = ["bench_pixel_policy", "--threads", "1", "--pretrain-steps", "3000", "--data", str(DATA)]
     steps = [("rows", [*rtc, "--heads", "dp", "--d", "1"]), ("rows", [*rtc, "--heads", "flow", "--d", "2,1"]),
              ("head", ["train_head", "flow-tp32", "--data", str(DATA), "--no-progress"]),
-             ("rows", [*rtc, "--heads", "flow-tp32", "--d", "4,6,8"]),
-             ("rows", [*pixels, "--only", "pretrain"]), ("rows", [*pixels, "--only", "pretrain", "--no-random-crops"]),
-             ("rows", [*pixels, "--only", "policy", "--route", "two-stage", "--policy-steps", "19259"]),
-             ("rows", [*pixels, "--only", "policy", "--route", "end-to-end", "--policy-steps",
-                       str(PIXEL_STEPS_END_TO_END)])]
-    act = ["bench_act_chunks", "--steps", "7000", "--threads", "1"]
+             ("rows", [*rtc, "--heads", "flow-tp32", "--d", "4,6,8"])]
+    act = ["bench_act_chunks", "--steps", "7000", "--threads", "1"]  # the course's second claim before pixels
     steps += [("train", [*act, "--train-seeds", str(s)]) for s in SEEDS]
     steps += [("record", [*act, "--train-seeds", *map(str, SEEDS)])]
+    steps += [("rows", [*pixels, "--only", "pretrain"]), ("rows", [*pixels, "--only", "pretrain", "--no-random-crops"]),
+              ("rows", [*pixels, "--only", "policy", "--route", "two-stage", "--policy-steps", "19259"]),
+              ("rows", [*pixels, "--only", "policy", "--route", "end-to-end", "--policy-steps",
+                        str(PIXEL_STEPS_END_TO_END)])]
     return steps
 
 
@@ -99,7 +99,7 @@ def command(kind: str, args: list[str], no_record: bool) -> list[str] | None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("queue", choices=sorted(QUEUES), help="a: issue 24's PushT runs; b: RTC, pixels, ACT's k sweep")
+    parser.add_argument("queue", choices=sorted(QUEUES), help="a: issue 24's PushT runs; b: RTC, ACT's k sweep, pixels")
     parser.add_argument("--list", action="store_true", help="print the queue's commands and stop")
     parser.add_argument("--no-record", action="store_true", help="write no rows (record steps are skipped)")
     args = parser.parse_args(argv)
