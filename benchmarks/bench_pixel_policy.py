@@ -153,6 +153,9 @@ def part_pretrain(args: argparse.Namespace, record) -> None:
            interval=(round(est.lo, 2), round(est.hi, 2)), n=est.n, note=note)
     record(SECTION, f"stage 1{variant(args)[1]}: training throughput", round(images_s), "images/s", cmd,
            note=f"{train_s:.0f} s for {args.pretrain_steps} steps on {torch.get_num_threads()} thread(s); {note}")
+    record(SECTION, "rendering the demonstrations' frames (once, before training)", round(len(frames) / render_s),
+           "frames/s", cmd, note=f"{len(frames)} frames of 96x96 in {render_s:.0f} s: the env's own renderer on the "
+           f"stored states, single process; the data sets keep states, a policy's trainer renders them once")
 
 
 def _pixel_policy(args: argparse.Namespace, dataset):

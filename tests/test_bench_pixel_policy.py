@@ -37,7 +37,8 @@ def test_pretrain_rows_are_measured_on_the_held_out_episode(demos, tmp_path, mon
     monkeypatch.setattr(benchmarks.results, "record", lambda *a, **k: rows.append((a, k)))
     bpp.main(["--only", "pretrain", "--pretrain-steps", "2", "--batch-size", "8", "--episodes-limit", "3",
               "--data", str(demos), "--out", str(tmp_path)])
-    (err, err_kw), (speed, _) = rows
+    (err, err_kw), (speed, _), (render, _) = rows
+    assert render[1].startswith("rendering the demonstrations' frames") and render[3] == "frames/s" and render[2] > 0
     _, _, episode = bpp.frames_and_keypoints(demos, 3)
     assert err[1] == "stage 1: held-out block keypoint error" and err[3] == "px"
     assert err_kw["n"] == int(np.sum(episode == 2)) and err_kw["interval"][0] <= err[2] <= err_kw["interval"][1]
@@ -45,7 +46,7 @@ def test_pretrain_rows_are_measured_on_the_held_out_episode(demos, tmp_path, mon
     assert [p.name for p in tmp_path.iterdir()] == ["encoder_pretrained_s2_b8_seed0.pt"]
     bpp.main(["--only", "pretrain", "--pretrain-steps", "2", "--batch-size", "8", "--episodes-limit", "3",
               "--data", str(demos), "--out", str(tmp_path), "--no-random-crops"])  # the augmentation off: its own rows
-    (plain, plain_kw), _ = rows[2:]
+    (plain, plain_kw), *_ = rows[3:]
     assert plain[1] == "stage 1 without random crops: held-out block keypoint error"
     assert plain[4].endswith("--no-random-crops") and "centre (no augmentation) crops" in plain_kw["note"]
     assert (tmp_path / "encoder_pretrained_s2_b8_seed0_nocrops.pt").is_file()
@@ -53,7 +54,7 @@ def test_pretrain_rows_are_measured_on_the_held_out_episode(demos, tmp_path, mon
     bpp.main(["--only", "pretrain", "--pretrain-steps", "2", "--batch-size", "8", "--episodes-limit", "3",
               "--data", str(demos), "--out", str(tmp_path)])  # finished before: loaded and measured, not retrained
     assert (tmp_path / "encoder_pretrained_s2_b8_seed0.pt").stat().st_mtime_ns == mtime
-    assert rows[4][0][2] == err[2] and rows[5][0][2] == speed[2]  # the same rows again
+    assert rows[6][0][2] == err[2] and rows[7][0][2] == speed[2]  # the same rows again
 
 
 @pytest.mark.slow
@@ -70,7 +71,7 @@ def test_two_stage_policy_trains_on_the_frozen_stage1_encoder(demos, tmp_path, m
     with pytest.raises(SystemExit, match="no stage-1 encoder"):
         bpp.main(["--only", "policy", "--policy-steps", "2", "--episodes", "1", *common])
     bpp.main(["--only", "pretrain", "policy", "--policy-steps", "2", "--episodes", "1", "--episodes-limit", "3", *common])
-    score, speed = rows[2:]
+    score, speed = rows[3:]
     assert score[0][1] == "DP from pixels, two-stage: score" and score[1]["n"] == 1
     assert speed[0][3] == "samples/s"
     stage1 = torch.load(tmp_path / "encoder_pretrained_s2_b8_seed0.pt", weights_only=False)["encoder"]
