@@ -7,7 +7,8 @@ when the test fails: the REST shutdown (which shuts the kernels down), then SIGT
 the server's process group and to every process the server started (kernels run in sessions of
 their own, meshcat servers under the kernels). ``leftover()`` lists any that survived.
 
-``LabPage`` wraps a playwright page: open a notebook, Run All, wait until every cell ran, save,
+``LabPage`` wraps a playwright page: open a notebook, Run All, wait until every cell ran (failing within
+seconds, with the kernel's fate and the server log, when Run All stops early), save,
 and read the executed notebook back from disk (errors are found in the saved file, not guessed
 from the DOM).
 """
@@ -155,6 +156,13 @@ def lab_server(tmp: Path, notebooks: list[Path], env_extra: dict[str, str] | Non
         log.close()
 
 
+STOPPED_GRACE_S = 5.0  # nothing running for this long while cells wait unrun: Run All has stopped
+
+
+class RunAllStopped(RuntimeError):
+    """Run All ended with cells that never ran (a cell raised, or the kernel died)."""
+
+
 class LabPage:
     """A notebook open in JupyterLab, driven by playwright."""
 
@@ -200,13 +208,37 @@ class LabPage:
                 time.sleep(0.5)
             if not all(p.strip() in ("[ ]:", "") for p in self.prompts()):
                 break
+        stopped_since = None
         while time.monotonic() < deadline:
             prompts = self.prompts()
-            if prompts and not any("*" in p for p in prompts) and all(p.strip() not in ("[ ]:", "") for p in prompts):
-                return
+            if prompts and not any("*" in p for p in prompts):
+                if all(p.strip() not in ("[ ]:", "") for p in prompts):
+                    return
+                # Nothing queued or running, yet cells never ran: JupyterLab drops the queue when a
+                # cell raises or the kernel dies. Waiting for the deadline would only hide that.
+                stopped_since = stopped_since or time.monotonic()
+                if time.monotonic() - stopped_since > STOPPED_GRACE_S:
+                    raise RunAllStopped(self._stopped_report(prompts))
+            else:
+                stopped_since = None
             time.sleep(1.0)
         self.page.screenshot(path=str(self.server.root / f"timeout-{self.name}.png"))
         raise TimeoutError(f"{self.name}: cells still running after {timeout_s} s; prompts {self.prompts()}")
+
+    def _stopped_report(self, prompts: list[str]) -> str:
+        """Why Run All stopped early: prompts, kernel status, visible errors and dialogs, server log."""
+        self.page.screenshot(path=str(self.server.root / f"stopped-{self.name}.png"))
+        status = self.page.locator(".jp-Notebook-ExecutionIndicator").first.get_attribute("data-status")
+        errors = self.page.locator(".jp-OutputArea-output[data-mime-type='application/vnd.jupyter.stderr']")
+        dialogs = self.page.locator(".jp-Dialog-content").all_inner_texts()
+        log = self.server.root.parent / "lab.log"
+        tail = log.read_text(errors="replace")[-3000:] if log.exists() else "(no server log)"
+        memory = psutil.virtual_memory()
+        return (f"{self.name}: Run All stopped before every cell ran; prompts {prompts}; kernel status "
+                f"{status!r}; dialogs {dialogs}; stderr outputs {errors.all_inner_texts()[-3:]}; memory "
+                f"available {memory.available / 2**30:.1f} of {memory.total / 2**30:.1f} GiB\n"
+                f"--- jupyter lab log (tail) ---\n{tail}\n--- kernel log lines about killed processes ---\n"
+                f"{_oom_lines()}")
 
     def save_and_read(self) -> dict:
         """Save the notebook from the browser and return the executed notebook JSON from disk."""
@@ -221,6 +253,16 @@ class LabPage:
                     return json.loads(path.read_text())
             time.sleep(0.5)
         raise TimeoutError(f"{self.name} was not saved within 60 s")
+
+
+def _oom_lines() -> str:
+    """The kernel log's last lines about killed processes (a dead kernel's usual cause), if readable."""
+    try:
+        out = subprocess.run(["dmesg"], capture_output=True, text=True, timeout=10).stdout
+    except (OSError, subprocess.TimeoutExpired):
+        return "(dmesg not available)"
+    lines = [ln for ln in out.splitlines() if "killed process" in ln.lower() or "out of memory" in ln.lower()]
+    return "\n".join(lines[-5:]) or "(none, or dmesg not readable)"
 
 
 def error_outputs(nb: dict) -> list[str]:

@@ -325,3 +325,33 @@ def test_the_server_and_its_kernels_stop_even_when_a_test_fails(tmp_path):
     server = seen["server"]
     assert server.proc.poll() is not None
     assert not server.leftover(), f"left behind: {server.leftover()}"
+
+
+@pytest.mark.parametrize(("cells", "says"), [
+    (["print('before')", "raise ValueError('boom in the second cell')", "print('never')"], "boom in the second cell"),
+    (["print('before')", "import os\nos._exit(3)", "print('never')"], "restart"),
+], ids=["a cell raises", "the kernel dies"])
+def test_run_all_that_stops_early_fails_at_once_and_says_why(browser, tmp_path, cells, says):
+    """JupyterLab drops its queue when a cell raises or the kernel dies: the harness must report
+    that within seconds (with the error, the kernel's fate and the server log), not wait out
+    RUN_ALL_TIMEOUT_S on cells that will never run (CI once spent 900 s so on chapter 0)."""
+    import nbformat
+    from lab_session import LabPage, RunAllStopped, lab_server
+
+    nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(c) for c in cells])
+    nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
+    path = tmp_path / "stops.ipynb"
+    nbformat.write(nb, path)
+    with lab_server(tmp_path / "srv", [path]) as server:
+        page = browser.new_page(viewport={"width": 1280, "height": 1000})
+        try:
+            lab_page = LabPage(page, server, path.name)
+            lab_page.open()
+            t0 = time.monotonic()
+            with pytest.raises(RunAllStopped) as stopped:
+                lab_page.run_all(RUN_ALL_TIMEOUT_S)
+            waited = time.monotonic() - t0
+        finally:
+            page.close()
+    assert waited < 120, f"Run All's stop was noticed only after {waited:.0f} s"
+    assert says in str(stopped.value).lower() or says in str(stopped.value), str(stopped.value)[:2000]
