@@ -114,3 +114,20 @@ def test_collect_workers_never_fork_the_caller(tmp_path):
     proc = subprocess.run([sys.executable, str(script)], env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode != 0, proc.stdout
     assert 'its top level must be guarded by `if __name__ == "__main__":`; or pass workers=1' in proc.stderr, proc.stderr[-2000:]
+
+
+def test_the_advice_workers_1_works_through_the_task_api(tmp_path):
+    """The error above says "or pass workers=1": an unguarded script that follows it through
+    ``get_task(...).collect`` (what a practitioner calls) runs in-process and gets the same data."""
+    script = tmp_path / "unguarded_one_worker.py"
+    script.write_text("import numpy as np\n"
+                      "from coursekit.tasks import get_task\n"
+                      "from coursekit.experts.aloha_scripted import collect\n"
+                      "a = get_task('transfer_cube').collect(1, 5, progress=False, workers=1)\n"
+                      "b = collect('transfer_cube', 1, seed=5, progress=False, workers=1)\n"
+                      "np.testing.assert_array_equal(a['action'], b['action'])\n"
+                      "print('same', a.meta['episode_seeds'])\n")
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parent.parent)}
+    proc = subprocess.run([sys.executable, str(script)], env=env, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "same [5]" in proc.stdout, proc.stdout

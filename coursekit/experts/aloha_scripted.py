@@ -348,11 +348,13 @@ def collect(task: str, n_episodes: int, seed: int = 0, progress: bool = True, cf
     return EpisodeDataset.from_episodes(kept, meta)
 
 
-def collect_transfer_cube(n_episodes: int, seed: int = 0, progress: bool = True) -> EpisodeDataset:
-    """Scripted transfer-cube demonstrations (``coursekit collect aloha-cube``)."""
-    return collect(TRANSFER_CUBE.name, n_episodes, seed, progress)
+def collect_transfer_cube(n_episodes: int, seed: int = 0, progress: bool = True,
+                          workers: int | None = None) -> EpisodeDataset:
+    """Scripted transfer-cube demonstrations (``coursekit collect aloha-cube``); ``workers`` as in :func:`collect`."""
+    return collect(TRANSFER_CUBE.name, n_episodes, seed, progress, workers=workers)
 
 
-def collect_insertion(n_episodes: int, seed: int = 0, progress: bool = True) -> EpisodeDataset:
-    """Scripted insertion demonstrations (``coursekit collect aloha-insertion``)."""
-    return collect(INSERTION.name, n_episodes, seed, progress)
+def collect_insertion(n_episodes: int, seed: int = 0, progress: bool = True,
+                      workers: int | None = None) -> EpisodeDataset:
+    """Scripted insertion demonstrations (``coursekit collect aloha-insertion``); ``workers`` as in :func:`collect`."""
+    return collect(INSERTION.name, n_episodes, seed, progress, workers=workers)

@@ -52,7 +52,7 @@ def arm_pair_scores(result: Any) -> tuple[np.ndarray, np.ndarray]:
 
 def _arm_pair_task(name: str, alias: str, gym_id: str, env: str, expert: str) -> Task:
     return Task(name=name, gym_id=gym_id, env=env, control_hz=CONTROL_HZ, max_steps=EPISODE_STEPS,
-                features="aloha_state", aliases=(alias,), expert=expert, demo_episodes=50,
+                features="aloha_state", aliases=(alias,), expert=expert, expert_options=("workers",), demo_episodes=50,
                 state_fn=arm_pair_state, metrics_fn=arm_pair_metrics, scores_fn=arm_pair_scores,
                 replay=ReplayDrawing(viewer="mujoco", columns=(len(STATE_COLUMNS), None), panel_hw=(240, 320),
                                      camera="angle"))
