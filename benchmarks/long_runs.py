@@ -31,10 +31,12 @@ from benchmarks.resumable import cache_dir
 DATA = cache_dir("data") / "pusht_400ep_seed0_noise0-5.npz"
 PERSON = cache_dir("data") / "pusht_400ep_seed0_noise0-5_person.npz"
 SEEDS = (0, 1, 2)
-PIXEL_STEPS_END_TO_END = 17700
-"""The end-to-end pixel run's steps at the two-stage route's CPU budget: stage 1 (3000 steps, about
-610 s) plus 19259 frozen-encoder steps at 387 samples/s of batch 128 (about 6370 s), divided by an
-end-to-end step at 325 samples/s (0.39 s): the throughput rows of ``bench_pixels``."""
+PIXEL_STEPS_END_TO_END = 16600
+"""The end-to-end pixel run's steps at the two-stage route's CPU budget: stage 1 (3000 steps of 128
+frames at 2249 images/s, 171 s: row "stage 1: training throughput") plus 19259 frozen-encoder steps
+at 387 samples/s of batch 128 (6370 s), divided by an end-to-end step at 325 samples/s (0.394 s):
+the idle throughput rows of ``bench_pixels`` and ``bench_pixel_policy`` (AMD EPYC, 2026-12-03).
+Rendering the frames (about 20 s) is the same for both routes and not counted."""
 
 
 def ablation(variants: list[str], steps: int, seeds, data: Path) -> list[str]:
