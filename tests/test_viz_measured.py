@@ -9,7 +9,8 @@ import pytest
 
 matplotlib.use("Agg")
 
-from coursekit.viz.measured import SHIPPED_ROWS, budget_curve, chunk_sweep, load_rows, plot_points, side_by_side  # noqa: E402
+from coursekit.viz.measured import (  # noqa: E402
+    DATA_SETS, SHIPPED_ROWS, budget_curve, by_data_set, chunk_sweep, load_rows, plot_points, side_by_side)
 
 
 def row(section, name, value, interval=None, n=None, unit=""):
@@ -34,6 +35,17 @@ ROWS = {
 
 def test_budget_curve_takes_the_all_starts_rows_with_a_budget_sorted_by_steps():
     assert budget_curve(ROWS) == {"Diffusion Policy DDIM-10": [(2000, 0.35, 0.32, 0.38, 600), (6000, 0.79, 0.78, 0.80, 600)]}
+
+
+def test_by_data_set_pairs_each_head_across_the_two_demonstration_sets_at_one_budget():
+    rows = {**ROWS,
+            "p": row("Chunk ablation (PushT)", "Diffusion Policy DDIM-10 (To=2, Tp=16, Ta=8) score, 3 training seed(s), "
+                     "6000 steps, person-like demonstrations", 0.70, [0.65, 0.75], 600),
+            "q": row("Chunk ablation (PushT)", "single-step regression (To=1, Tp=Ta=1) score, 3 training seed(s), "
+                     "6000 steps, person-like demonstrations, two-way starts", 0.5, [0.4, 0.6], 234)}  # a subset: not a point
+    assert DATA_SETS == ("scripted planner", "person-like")
+    assert by_data_set(rows) == {"Diffusion Policy DDIM-10": [(0, 0.79, 0.78, 0.80, 600), (1, 0.70, 0.65, 0.75, 600)]}
+    assert by_data_set(rows, steps=2000) == {"Diffusion Policy DDIM-10": [(0, 0.35, 0.32, 0.38, 600)]}
 
 
 def test_chunk_sweep_in_fractions_with_the_no_cvae_point_apart():

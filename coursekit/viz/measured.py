@@ -8,6 +8,7 @@ readers return nothing and the figures say where the rows come from.
 
     load_rows(section)        {key: row} of one section (all sections when None)
     budget_curve(rows)        variant -> [(steps, value, lo, hi, n)]   (bench_chunk_ablation)
+    by_data_set(rows, steps)  variant -> [(data set, value, lo, hi, n)]: the heads step for step on each data set
     chunk_sweep(rows)         executor -> [(k, value, lo, hi, n)], and the no-CVAE rows (bench_act_chunks)
     side_by_side(rows)        task -> [(head, value, lo, hi, n)]: the shipped checkpoints (chapter 9)
     plot_points(ax, pts, ...) one series with its interval bars
@@ -25,6 +26,10 @@ RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "results.json"
 Point = tuple  # (x, value, lo, hi, n)
 
 _BUDGET = re.compile(r"^(?P<variant>.+?) \(To=.*\) score, (?P<seeds>\d+) training seed\(s\), (?P<steps>\d+) steps$")
+_DATA = re.compile(r"^(?P<variant>.+?) \(To=.*\) score, (?P<seeds>\d+) training seed\(s\), (?P<steps>\d+) steps"
+                   r"(?P<person>, person-like demonstrations)?$")
+DATA_SETS = ("scripted planner", "person-like")
+"""The PushT demonstration sets of ``by_data_set``, in x order (``coursekit collect pusht`` without / with ``--style person``)."""
 _CHUNK = re.compile(r"^ACT k=(?P<k>\d+)(?P<novae> without CVAE)?, (?P<executor>.+): strict success$")
 
 
@@ -54,6 +59,21 @@ def budget_curve(rows: dict[str, dict[str, Any]]) -> dict[str, list[Point]]:
         if m:
             curves.setdefault(m["variant"], []).append(_point(int(m["steps"]), row))
     return {v: sorted(p) for v, p in sorted(curves.items())}
+
+
+def by_data_set(rows: dict[str, dict[str, Any]], steps: int = 6000) -> dict[str, list[Point]]:
+    """variant -> [(index into DATA_SETS, mean score over training seeds, lo, hi, episodes)], by data set.
+
+    Reads the same "Chunk ablation (PushT)" rows as :func:`budget_curve` at one budget ``steps``, with
+    and without ", person-like demonstrations" (all starts only): the heads trained step for step on
+    each set. A set whose rows are not in yet has no point.
+    """
+    out: dict[str, list[Point]] = {}
+    for row in rows.values():
+        m = _DATA.match(row["name"]) if row["section"] == "Chunk ablation (PushT)" else None
+        if m and int(m["steps"]) == steps:
+            out.setdefault(m["variant"], []).append(_point(int(bool(m["person"])), row))
+    return {v: sorted(p) for v, p in sorted(out.items())}
 
 
 def chunk_sweep(rows: dict[str, dict[str, Any]]) -> tuple[dict[str, list[Point]], dict[str, Point]]:
