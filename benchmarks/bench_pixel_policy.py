@@ -158,6 +158,11 @@ def part_pretrain(args: argparse.Namespace, record) -> None:
            f"stored states, single process; the data sets keep states, a policy's trainer renders them once")
 
 
+def score_row(route: str, crops_suffix: str = "") -> str:
+    """The name of a pixel route's score row ("DP from pixels, two-stage: score"; chapter 12's figure reads it)."""
+    return f"DP from pixels, {route}{crops_suffix}: score"
+
+
 def _pixel_policy(args: argparse.Namespace, dataset):
     """A fresh image DP with the route's encoder: (policy, batches, recipe)."""
     import torch
@@ -201,7 +206,7 @@ def part_policy(args: argparse.Namespace, record) -> None:
             f"{training['train_config']['batch_size']} in {training['seconds'] / 60:.0f} min on {args.threads} thread(s)"
             f"{' after stage 1 (' + str(args.pretrain_steps) + ' steps, encoder frozen)' if args.route == 'two-stage' else ''}; "
             f"training seed {args.seed}; success {np.mean(saved['success']):.3f}")
-    record(SECTION, f"{label}: score", round(est.value, 3), "", cmd, interval=(round(est.lo, 3), round(est.hi, 3)),
+    record(SECTION, score_row(args.route, variant(args)[1]), round(est.value, 3), "", cmd, interval=(round(est.lo, 3), round(est.hi, 3)),
            n=est.n, seeds=f"{seeds[0]}-{seeds[-1]}", note=note)
     record(SECTION, f"{label}: training throughput", round(training["samples_per_s"]), "samples/s", cmd, note=note)
     if args.ship:

@@ -10,7 +10,8 @@ import pytest
 matplotlib.use("Agg")
 
 from coursekit.viz.measured import (  # noqa: E402
-    DATA_SETS, SHIPPED_ROWS, budget_curve, by_data_set, chunk_sweep, load_rows, plot_points, side_by_side)
+    DATA_SETS, PIXEL_ROUTES, SHIPPED_ROWS, budget_curve, by_data_set, chunk_sweep, load_rows, plot_points,
+    side_by_side)
 
 
 def row(section, name, value, interval=None, n=None, unit=""):
@@ -95,3 +96,17 @@ def test_every_shipped_row_the_figure_names_is_in_the_table():
     missing = [key for heads in SHIPPED_ROWS.values() for _, key in heads if key not in table]
     assert not missing, f"chapter 9's figure names rows the table lacks: {missing}"
     assert all(table[key]["n"] >= 200 and table[key]["interval"] for heads in SHIPPED_ROWS.values() for _, key in heads)
+
+
+def test_the_pixel_figure_names_the_rows_bench_pixel_policy_writes_and_the_keypoint_row_exists():
+    from pathlib import Path
+
+    from benchmarks.bench_pixel_policy import SECTION, score_row
+
+    (task, heads), = PIXEL_ROUTES.items()
+    keys = [key for _, key in heads]
+    assert keys[1:] == [f"{SECTION}/{score_row('two-stage')}", f"{SECTION}/{score_row('end-to-end')}"]
+    table = load_rows(path=Path(__file__).resolve().parent.parent / "benchmarks" / "results.json")
+    assert keys[0] in table and table[keys[0]]["n"] >= 200
+    got = side_by_side({keys[2]: row(SECTION, "z", 0.5, [0.45, 0.55], 200)}, PIXEL_ROUTES)
+    assert got == {task: [(heads[2][0], 0.5, 0.45, 0.55, 200)]}

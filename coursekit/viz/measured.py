@@ -11,6 +11,7 @@ readers return nothing and the figures say where the rows come from.
     by_data_set(rows, steps)  variant -> [(data set, value, lo, hi, n)]: the heads step for step on each data set
     chunk_sweep(rows)         executor -> [(k, value, lo, hi, n)], and the no-CVAE rows (bench_act_chunks)
     side_by_side(rows)        task -> [(head, value, lo, hi, n)]: the shipped checkpoints (chapter 9)
+    side_by_side(rows, PIXEL_ROUTES)  the same for chapter 12: the pixel routes beside the keypoint policy
     plot_points(ax, pts, ...) one series with its interval bars
 """
 
@@ -110,14 +111,27 @@ SHIPPED_ROWS = {  # task -> [(head label, row key)]: every shipped checkpoint's 
 }
 """The chapter-9 comparison: which row scores each shipped head on each task."""
 
+PIXEL_ROUTES = {  # chapter 12: Diffusion Policy from keypoints and from pixels, DDIM-10, Ta = 8, 200 protocol seeds
+    "PushT (score: mean max coverage)": [
+        ("keypoints: shipped, 19259 steps", "Diffusion Policy/shipped checkpoint score, DDIM-10 (notebook 05)"),
+        ("pixels, two-stage: stage 1 + 19259 steps, encoder frozen",
+         "Pixels (PushT): two-stage route/DP from pixels, two-stage: score"),
+        ("pixels, end to end: 16600 steps, same CPU time", "Pixels (PushT): two-stage route/DP from pixels, end-to-end: score"),
+    ],
+}
+"""The chapter-12 comparison (``benchmarks/bench_pixel_policy.py --only policy``; the end-to-end run's steps
+are the two-stage route's CPU seconds at its own, slower step: ``benchmarks/long_runs.py``)."""
 
-def side_by_side(rows: dict[str, dict[str, Any]]) -> dict[str, list[tuple]]:
-    """task -> [(head, value, lo, hi, n)] of the shipped checkpoints, as fractions (rows in % are divided by 100).
+
+def side_by_side(rows: dict[str, dict[str, Any]],
+                 table: dict[str, list[tuple[str, str]]] | None = None) -> dict[str, list[tuple]]:
+    """task -> [(head, value, lo, hi, n)] of ``table``'s rows (default :data:`SHIPPED_ROWS`), as fractions
+    (rows in % are divided by 100).
 
     A row missing from ``rows`` is left out (a pip-installed package has no table: every task is empty).
     """
     out: dict[str, list[tuple]] = {}
-    for task, heads in SHIPPED_ROWS.items():
+    for task, heads in (SHIPPED_ROWS if table is None else table).items():
         for head, key in heads:
             if key in rows:
                 row = rows[key]
