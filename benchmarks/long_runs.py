@@ -65,6 +65,7 @@ def queue_b() -> list[tuple[str, list[str]]]:
     act = ["bench_act_chunks", "--steps", "7000", "--threads", "1"]  # the course's second claim before pixels
     steps += [("train", [*act, "--train-seeds", str(s)]) for s in SEEDS]
     steps += [("record", [*act, "--train-seeds", *map(str, SEEDS)])]
+    steps += [("rows", [*act, "--train-seeds", "0", "--variants", "ACT k=100 from the top camera"])]  # 26's stretch
     steps += [("rows", [*pixels, "--only", "pretrain"]), ("rows", [*pixels, "--only", "pretrain", "--no-random-crops"]),
               ("rows", [*pixels, "--only", "policy", "--route", "two-stage", "--policy-steps", "19259"]),
               ("rows", [*pixels, "--only", "policy", "--route", "end-to-end", "--policy-steps",

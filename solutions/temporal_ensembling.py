@@ -11,7 +11,7 @@ from collections.abc import Callable
 from typing import Any
 import numpy as np
 
-from coursekit.execution.receding import to_numpy
+from coursekit.execution.receding import batch_size_of, observation_arrays, stack_history, to_numpy
 
 
 class TemporalEnsemble:
@@ -47,7 +47,7 @@ class TemporalEnsemble:
         self.ensemble_decay = float(ensemble_decay)
         self.newest_first = bool(newest_first)
         self.start = int(start)
-        self._history: np.ndarray | None = None  # (B, To, Do)
+        self._history: list[Any] | None = None  # To observations (B, Do), or dicts of (B, ...) arrays, oldest first
         self._chunks: list[tuple[int, np.ndarray]] = []  # (step made at, (B, Tp - start, Da))
         self.t = 0
 
@@ -57,23 +57,26 @@ class TemporalEnsemble:
         return cls(predict_chunk, n_obs_steps=int(spec.n_obs_steps), ensemble_decay=float(spec.ensemble_decay))
 
     def reset(self, obs: Any) -> None:
-        """Start an episode: history = To copies of ``obs`` (B, Do); forget every chunk."""
-        obs = to_numpy(obs)
-        if obs.ndim != 2:
+        """Start an episode: history = To copies of ``obs`` (B, Do), or of a dict of (B, ...) arrays
+        (an image policy's {"image", "agent_pos"}, kept in their own dtype); forget every chunk."""
+        obs = observation_arrays(obs)
+        if not isinstance(obs, dict) and obs.ndim != 2:
             raise ValueError(f"reset expects obs of shape (B, Do), got {obs.shape}")
-        self._history = np.repeat(obs[:, None, :], self.n_obs_steps, axis=1)  # (B, To, Do)
+        self._history = [obs] * self.n_obs_steps
         self._chunks = []
         self.t = 0
 
-    def _observe(self, obs: Any) -> np.ndarray:
-        """Shift ``obs`` (B, Do) into the history and return it, (B, To, Do)."""
+    def _observe(self, obs: Any) -> Any:
+        """Shift ``obs`` (B, Do) into the history and return it, (B, To, Do) (a dict: key by key)."""
         if self._history is None:
             raise ValueError("act() called before reset(obs): call reset with the first observation")
-        obs = to_numpy(obs)
-        if obs.shape != (self._history.shape[0], self._history.shape[2]):
-            raise ValueError(f"act expects obs of shape {(self._history.shape[0], self._history.shape[2])} (B, Do), got {obs.shape}")
-        self._history = np.concatenate([self._history[:, 1:], obs[:, None, :]], axis=1)  # (B, To, Do)
-        return self._history
+        obs, last = observation_arrays(obs), self._history[-1]
+        shapes = ({k: v.shape for k, v in obs.items()} if isinstance(obs, dict) else obs.shape,
+                  {k: v.shape for k, v in last.items()} if isinstance(last, dict) else last.shape)
+        if shapes[0] != shapes[1]:
+            raise ValueError(f"act expects obs of shape {shapes[1]} (B, Do), got {shapes[0]}")
+        self._history = [*self._history[1:], obs]
+        return stack_history(self._history)  # (B, To, Do)
 
     def act(self, obs: Any) -> np.ndarray:
         """One control step at time t = self.t: predict a chunk, return the ensembled action (B, Da).
@@ -88,8 +91,9 @@ class TemporalEnsemble:
         """
         history = self._observe(obs)
         chunk = to_numpy(self.predict_chunk(history))  # (B, Tp, Da)
-        if chunk.ndim != 3 or chunk.shape[0] != history.shape[0] or chunk.shape[1] <= self.start:
-            raise ValueError(f"predict_chunk must return (B={history.shape[0]}, Tp > start={self.start}, Da), got {chunk.shape}")
+        B = batch_size_of(history)
+        if chunk.ndim != 3 or chunk.shape[0] != B or chunk.shape[1] <= self.start:
+            raise ValueError(f"predict_chunk must return (B={B}, Tp > start={self.start}, Da), got {chunk.shape}")
         t = self.t
         self._chunks.append((t, chunk[:, self.start:]))  # keep only steps from "now" on: (B, Tp - start, Da)
         # drop chunks that no longer cover time t (made at s with s + len <= t)

@@ -164,7 +164,7 @@ CASES = [
     ("train --data {A}/demos.npz --out {A}/run --steps 2 --policy act --horizon 32", "--horizon 32 does not apply to --policy act"),
     ("train --data {A}/demos.npz --out {A}/run --steps 2 --horizon 18", "horizon 18 must be divisible by 2**(len(down_dims)-1) = 4"),
     ("train --data {A}/demos.npz --out {A}/run --steps 2 --horizon 1", "argument --horizon: must be an integer in [2, 1000], got '1'"),
-    ("train --data {A}/demos.npz --out {A}/run --steps 2 --vision resnet18", "--vision resnet18 applies to image features (--features pusht_image), not pusht_state"),
+    ("train --data {A}/demos.npz --out {A}/run --steps 2 --vision resnet18", "--vision resnet18 applies to image features (--features pusht_image or aloha_image), not pusht_state"),
     ("train --data {A}/demos.npz --out {A}/run", "give a budget: --minutes M and/or --steps N"),
     ("train --data {A}/demos.npz --steps 2 --out {A}/results", "--out '{A}/results' exists and is not a coursekit run folder (it holds 'table.csv', which a run never writes)"),
     ("train --data {A}/demos.npz --steps 2 --out {A}/results --overwrite", "is not a coursekit run folder"),

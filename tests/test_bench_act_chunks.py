@@ -9,8 +9,12 @@ from coursekit.stats import wilson_interval
 
 
 def test_variants_are_the_issues_k_grid_and_the_cvae_ablation():
-    assert [v["chunk_size"] for v in bac.VARIANTS.values()] == [1, 10, 25, 100, 100]
-    assert [v.get("use_vae", True) for v in bac.VARIANTS.values()] == [True] * 4 + [False]
+    sweep = [bac.VARIANTS[name] for name in bac.SWEEP]
+    assert [v["chunk_size"] for v in sweep] == [1, 10, 25, 100, 100]
+    assert [v.get("use_vae", True) for v in sweep] == [True] * 4 + [False]
+    assert all("features" not in v for v in sweep)  # the sweep is on states; the camera run is asked for by name
+    (camera,) = set(bac.VARIANTS) - set(bac.SWEEP)
+    assert bac.VARIANTS[camera]["features"] == "aloha_image" and bac.VARIANTS[camera]["chunk_size"] == 100
 
 
 @pytest.mark.slow

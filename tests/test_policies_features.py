@@ -43,7 +43,8 @@ def test_keypoint_features_match_env_observation_and_geometry():
 
 
 def test_registry_and_bad_input():
-    assert set(FEATURES) == {"pusht_state", "pusht_keypoints", "pusht_image", "aloha_state", "aloha_qpos", "raw_state"}
+    assert set(FEATURES) == {"pusht_state", "pusht_keypoints", "pusht_image", "aloha_state", "aloha_qpos", "aloha_image",
+                             "raw_state"}
     raw = get_features("raw_state")
     assert raw.task is None  # fits every task
     np.testing.assert_array_equal(raw(np.array([[0.5, -1.25]])), np.array([[0.5, -1.25]], dtype=np.float32))

@@ -34,7 +34,7 @@ from typing import Any
 
 from coursekit.commands._args import device, float_in, int_in, int_list_in, output_path, seed_int, threads
 
-from coursekit.data.features import FEATURES  # numpy only: `coursekit --help` stays instant
+from coursekit.data.features import FEATURES, get_features  # numpy only: `coursekit --help` stays instant
 from coursekit.policies import POLICY_TYPES  # the registry itself (no torch until a class is used)
 
 STATE_NAME = "train_state.pt"
@@ -73,7 +73,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--unet", default=None, help="U-Net size preset: cpu (default), paper_lowdim, paper_image")
     parser.add_argument("--down-dims", type=int_list_in(1, MAX_CHANNELS, MAX_LEVELS), default=None,
                         help=f"override the preset's U-Net channels, e.g. 32,64,128 (each at most {MAX_CHANNELS})")
-    parser.add_argument("--vision", default=None, help="image encoder preset for --features pusht_image: cpu (default), resnet18, small "
+    parser.add_argument("--vision", default=None, help="image encoder preset for image features (pusht_image, aloha_image): cpu (default), resnet18, small "
                              "(96x96 frames encoded at 48x48: the CPU route of chapter 12)")
     parser.add_argument("--n-action-steps", type=int_in(1, MAX_CHUNK_SIZE), default=None,
                         help="Ta, actions executed per chunk (default: the policy's, 8 for diffusion/regression)")
@@ -158,8 +158,9 @@ def _train(args: argparse.Namespace, lock: Any) -> int:
     dataset = EpisodeDataset.load(args.data)
     features = args.features or default_features(dataset.arrays, dataset.meta)
     check_against_data(args, dataset, features)
-    if args.vision is not None and features != "pusht_image":
-        raise ValueError(f"--vision {args.vision} applies to image features (--features pusht_image), not {features}")
+    if args.vision is not None and get_features(features).obs_type != "image":
+        raise ValueError(f"--vision {args.vision} applies to image features (--features pusht_image or aloha_image), "
+                         f"not {features}")
     overrides = {"lr": args.lr, "batch_size": args.batch_size or (64 if features == "pusht_image" else None),
                  "warmup_steps": args.warmup_steps, "lr_schedule": args.lr_schedule}
     overrides = {k: v for k, v in overrides.items() if v is not None}

@@ -110,7 +110,7 @@ class FeatureSet:
     fn: Callable[..., np.ndarray]
     """Arrays (..., d_i) in ``reads`` order -> low-dim features (..., Do) float32."""
     obs_type: str = "low_dim"
-    """'low_dim', or 'image' (a camera image beside the low-dim vector, which is then agent_pos)."""
+    """'low_dim', or 'image' (a camera image beside the low-dim vector, which is then "agent_pos")."""
 
     def __call__(self, data: Any) -> np.ndarray:
         """Features of a mapping holding the ``reads`` arrays, or of the one array a one-array set reads."""
@@ -130,6 +130,7 @@ FEATURES: dict[str, FeatureSet] = {
     "pusht_image": FeatureSet("pusht", ("state",), pusht_agent_pos, obs_type="image"),
     "aloha_state": FeatureSet("aloha", ("qpos", "env_state"), aloha_state_features),
     "aloha_qpos": FeatureSet("aloha", ("qpos",), aloha_qpos_features),
+    "aloha_image": FeatureSet("aloha", ("qpos",), aloha_qpos_features, obs_type="image"),
     "raw_state": FeatureSet(None, ("state",), raw_state_features),
 }
 """Feature name (stored in a policy's config) -> :class:`FeatureSet`, for every task and policy."""
@@ -175,9 +176,10 @@ def training_arrays(dataset: Any, features: str, image_size: tuple[int, int] = (
                     ) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """Demonstrations -> (observation arrays, action (N, Da) float32) for a batcher and ``fit_normalizers``.
 
-    Low-dim features give ``{"obs": (N, Do)}``; 'pusht_image' gives ``{"image": (N, 3, H, W) uint8,
-    "agent_pos": (N, 2)}``, the images rendered from the stored states with the env's own
-    observation renderer (the dataset keeps states only; 96 x 96 x 3 bytes is 28 kB per step).
+    Low-dim features give ``{"obs": (N, Do)}``; image features give ``{"image": (N, 3, H, W) uint8,
+    "agent_pos": (N, Do)}`` (PushT: the pusher, Do = 2; the arm pair: qpos, Do = 14), the images
+    the data set's own "image" frames or else rendered from its stored states by the env's own
+    camera (:func:`render_frames`: the data set keeps states only; 96 x 96 x 3 bytes is 28 kB a step).
     """
     spec = get_features(features)
     if "action" not in dataset.arrays:
@@ -194,11 +196,33 @@ def training_arrays(dataset: Any, features: str, image_size: tuple[int, int] = (
 
         images = frames_chw(dataset["image"], tuple(image_size), "the data set's 'image' frames")  # (N, 3, H, W)
     else:
+        images = render_frames(dataset, spec.task, tuple(image_size))  # (N, 3, H, W)
+    return {"image": np.ascontiguousarray(images, dtype=np.uint8), "agent_pos": spec(dataset.arrays)}, action
+
+
+def render_frames(dataset: Any, world: str | None, image_size: tuple[int, int]) -> np.ndarray:
+    """The camera frame of every stored step, (N, 3, H, W) uint8, drawn by the env's own observation camera.
+
+    PushT draws its "state" rows (``coursekit.envs.pusht_render``); the arm pair sets each
+    "physics_qpos" row (the full MuJoCo state its demonstrations store) and renders the "top"
+    camera, the one its "pixels" observations show (``coursekit.envs.aloha``).
+    """
+    if world == "pusht":
         from coursekit.envs.pusht_render import PushTRenderer
 
-        renderer = PushTRenderer(tuple(image_size))
-        images = np.stack([renderer.render(s) for s in dataset["state"]]).transpose(0, 3, 1, 2)  # (N, 3, H, W)
-    return {"image": np.ascontiguousarray(images, dtype=np.uint8), "agent_pos": spec(dataset.arrays)}, action
+        renderer = PushTRenderer(image_size)
+        return np.stack([renderer.render(s) for s in dataset["state"]]).transpose(0, 3, 1, 2)  # (N, 3, H, W)
+    if world == "aloha":
+        from coursekit.envs.aloha.env import render_physics_states
+        from coursekit.tasks.registry import task_in_meta
+
+        task = task_in_meta(dataset.meta)
+        if task is None or "physics_qpos" not in dataset.arrays:
+            raise ValueError(f"rendering arm-pair frames needs a data set that names its task in its meta and "
+                             f"stores 'physics_qpos' (coursekit collect writes both); got meta task "
+                             f"{(dataset.meta or {}).get('task')!r} and arrays {sorted(dataset.arrays)}")
+        return render_physics_states(task.name, dataset["physics_qpos"], image_size)  # (N, 3, H, W)
+    raise ValueError(f"no camera for the {world!r} world's frames: the data set needs an 'image' array")
 
 
 def env_obs_features(name: str, observations: Sequence[Any]) -> np.ndarray:

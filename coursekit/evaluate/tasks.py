@@ -53,16 +53,24 @@ class RecordAdapter:
         return self.record.make_env(max_episode_steps=max_steps, **pixels)
 
     def obs_fn(self, observations: list[Any]) -> Any:
-        """B raw env observations -> (B, Do) features, or {"image": (B, 3, H, W), "agent_pos": (B, 2)}."""
-        if self.image_size is None:
-            from coursekit.data.features import env_obs_features
+        """B raw env observations -> (B, Do) features, or {"image": (B, 3, H, W), "agent_pos": (B, Do)}.
 
+        An image env's low-dim part is its "agent_pos" (PushT's pusher) or else the features of its
+        other observations (the arm pair's "qpos" for 'aloha_image').
+        """
+        from coursekit.data.features import env_obs_features
+
+        if self.image_size is None:
             return env_obs_features(self.features, observations)  # (B, Do)
         from coursekit.data.frames import frames_chw
 
         pixels = np.stack([o["pixels"] for o in observations])  # (B, H, W, 3) uint8
+        if "agent_pos" in observations[0]:
+            low = np.stack([o["agent_pos"] for o in observations]).astype(np.float32)  # (B, Do)
+        else:
+            low = env_obs_features(self.features, [{k: v for k, v in o.items() if k != "pixels"} for o in observations])
         return {"image": frames_chw(pixels, self.image_size, "the environment's camera frames"),  # (B, 3, H, W)
-                "agent_pos": np.stack([o["agent_pos"] for o in observations]).astype(np.float32)}  # (B, 2)
+                "agent_pos": low}
 
     def state_fn(self, env: Any) -> np.ndarray:
         """The (S,) state recorded per step: the record's, or ``env.unwrapped.get_state()``."""

@@ -52,6 +52,16 @@ def to_numpy(x: Any) -> Any:
     return np.asarray(x, dtype=np.float64)
 
 
+def observation_arrays(obs: Any) -> Any:
+    """An observation batch as float64 numpy (B, Do), or a dict of numpy arrays in their own dtype
+    (uint8 frames stay uint8: a policy reads 0..255 floats as out of range)."""
+    import numpy as np
+
+    if isinstance(obs, dict):
+        return {k: v.detach().cpu().numpy() if hasattr(v, "detach") else np.asarray(v) for k, v in obs.items()}
+    return to_numpy(obs)
+
+
 def batch_size_of(obs: Any) -> int:
     """B of an observation batch (B, ...) or of a dict of them."""
     if isinstance(obs, dict):

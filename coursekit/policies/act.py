@@ -17,7 +17,8 @@ Departures from the original code, on purpose:
 
 - Observations: ``o_t`` is a low-dim feature vector of size Do (ALOHA: qpos (14) + the object
   poses the env exposes), projected to ONE token; the paper's token is qpos alone and the scene
-  is seen through images (available here with ``obs_type="image"``).
+  is seen through images (available here with ``obs_type="image"``: features 'aloha_image', the
+  arm pair's "top" camera rendered from the stored states beside qpos; one camera, not the paper's four).
 - The FULL decoder stack is used (the original keeps only the first decoder layer's output by
   a slip; see :mod:`coursekit.nn.act_transformer`).
 - The L1 term is the mean over NON-padded entries; the original multiplies by the mask and then
@@ -150,6 +151,15 @@ class ACTConfig:
         return cls(**{**base, **overrides})
 
 
+def low_dim(obs: Mapping[str, Any]) -> Any:
+    """The low-dim vector of an observation dict: "obs", or "agent_pos" beside an "image" (the feature
+    table's name for it, ``coursekit.data.features``)."""
+    for key in ("obs", "agent_pos"):
+        if key in obs:
+            return obs[key]
+    raise ValueError(f"observation dict lacks 'obs' (or 'agent_pos' beside an image); got keys {sorted(obs)}")
+
+
 class ImageTokens(nn.Module):
     """Camera image -> tokens: ResNet-style trunk, 1x1 conv to D, 2-D sine positions.
 
@@ -223,10 +233,9 @@ class ACTPolicy(ChunkPolicy):
         return {"obs": self.config.obs_dim, "action": self.config.action_dim}
 
     def fit_normalizers(self, obs: Mapping[str, Any], action: Any, min_std: float = 0.01) -> None:
-        """Mean/std (std clipped at ``min_std``, ACT's 0.01) of obs {"obs": (N, Do)} and action (N, Da)."""
-        if "obs" not in obs:
-            raise ValueError(f"fit_normalizers needs obs['obs'] (N, Do), got keys {sorted(obs)}")
-        self.set_normalizers({"obs": MeanStdNormalizer.fit(np.asarray(obs["obs"]), min_std),
+        """Mean/std (std clipped at ``min_std``, ACT's 0.01) of obs {"obs": (N, Do)} (image features:
+        {"agent_pos": (N, Do), "image": ...}) and action (N, Da)."""
+        self.set_normalizers({"obs": MeanStdNormalizer.fit(np.asarray(low_dim(obs)), min_std),
                               "action": MeanStdNormalizer.fit(np.asarray(action), min_std)})
 
     # ---- the two halves of the CVAE ------------------------------------------------------------
@@ -262,9 +271,7 @@ class ACTPolicy(ChunkPolicy):
         """
         c = self.config
         if isinstance(obs_history, Mapping):
-            low, img = obs_history.get("obs"), obs_history.get("image")
-            if low is None:
-                raise ValueError(f"observation dict lacks 'obs'; got keys {sorted(obs_history)}")
+            low, img = low_dim(obs_history), obs_history.get("image")
         else:
             low, img = obs_history, None
         obs = as_float_tensor(low, "observation 'obs'", self.device)
@@ -299,7 +306,7 @@ class ACTPolicy(ChunkPolicy):
         """
         self._require_normalizers()
         c = self.config
-        obs, images = self._inputs({k: batch[k] for k in ("obs", "image") if k in batch})
+        obs, images = self._inputs({k: batch[k] for k in ("obs", "agent_pos", "image") if k in batch})
         action = as_float_tensor(batch["action"], "batch 'action'", self.device)
         if action.shape != (obs.shape[0], c.chunk_size, c.action_dim):
             raise ValueError(f"batch 'action' must be (B={obs.shape[0]}, k={c.chunk_size}, Da={c.action_dim}), got {tuple(action.shape)}")
@@ -341,7 +348,7 @@ class ACTPolicy(ChunkPolicy):
             chunk = self.normalizers["action"].unnormalize(self.decode(self.normalizers["obs"].normalize(obs), z, images))
         finally:
             self.train(was_training)
-        first = obs_history.get("obs") if isinstance(obs_history, Mapping) else obs_history
+        first = low_dim(obs_history) if isinstance(obs_history, Mapping) else obs_history
         return chunk.cpu().numpy() if isinstance(first, np.ndarray) else chunk  # (B, k, Da)
 
     # ---- training setup and execution ------------------------------------------------------------
@@ -350,14 +357,13 @@ class ACTPolicy(ChunkPolicy):
         """ACTConfig from the data's dimensions; ``preset`` "cpu" (default size) or "paper" (Table VI)."""
         if preset not in (None, "cpu", "paper"):
             raise ValueError(f"ACT preset must be 'cpu' or 'paper', got {preset!r}")
-        if fields.get("obs_type") == "image":
-            raise ValueError("make_policy builds low-dim ACT only (its image input reads rendered arm-pair frames); "
-                             "choose low-dim features such as 'aloha_state' or 'pusht_state'")
         return ACTConfig.paper(**fields) if preset == "paper" else ACTConfig(**fields)
 
     def make_batcher(self, obs: Mapping[str, Any], action: Any, episode_ends: Any, *, batch_size: int,
                      seed: int = 0, device: Any = "cpu") -> ChunkBatcher:
-        """One sample per step: ``{"obs": (B, Do), "action": (B, k, Da), "action_is_pad": (B, k)}``."""
+        """One sample per step: ``{"obs": (B, Do), "action": (B, k, Da), "action_is_pad": (B, k)}`` (and
+        "image": (B, 3, H, W) uint8 for image features, whose "agent_pos" becomes "obs")."""
+        obs = {"obs": low_dim(obs), **({"image": obs["image"]} if "image" in obs else {})}
         return ChunkBatcher(obs, action, episode_ends, chunk_size=self.config.chunk_size, batch_size=batch_size,
                             seed=seed, device=device)
 

@@ -50,10 +50,15 @@ def arm_pair_scores(result: Any) -> tuple[np.ndarray, np.ndarray]:
     return result.states[:, :, 0].max(axis=1), result.states[:, -1, 1] > 0.5
 
 
+def _top_camera(image_hw: tuple[int, int]) -> dict[str, Any]:
+    """Env kwargs of an image policy: "pixels" (H, W, 3) from the "top" camera beside "qpos" (14,)."""
+    return {"obs_type": "pixels", "render_size": tuple(image_hw)}
+
+
 def _arm_pair_task(name: str, alias: str, gym_id: str, env: str, expert: str) -> Task:
     return Task(name=name, gym_id=gym_id, env=env, control_hz=CONTROL_HZ, max_steps=EPISODE_STEPS,
                 features="aloha_state", aliases=(alias,), expert=expert, expert_options=("workers",), demo_episodes=50,
-                state_fn=arm_pair_state, metrics_fn=arm_pair_metrics, scores_fn=arm_pair_scores,
+                state_fn=arm_pair_state, metrics_fn=arm_pair_metrics, scores_fn=arm_pair_scores, image_env_kwargs=_top_camera,
                 replay=ReplayDrawing(viewer="mujoco", columns=(len(STATE_COLUMNS), None), panel_hw=(240, 320),
                                      camera="angle"))
 

@@ -245,3 +245,24 @@ class AlohaInsertionEnv(AlohaEnv):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(task=INSERTION.name, **kwargs)
+
+
+def render_physics_states(task: str, physics_qpos, size: tuple[int, int], camera: str = "top") -> np.ndarray:
+    """Frames of stored MuJoCo states: physics_qpos (N, nq) of ``task`` -> (N, 3, H, W) uint8 from ``camera``.
+
+    Each row is set on one env of the task (``set_physics_state``, velocities zero: a frame depends on
+    positions alone) and drawn the way that env's "pixels" observations are, so a policy trained on
+    these frames sees at evaluation exactly what it saw in training.
+    """
+    qpos = np.asarray(physics_qpos, dtype=np.float64)
+    env = AlohaEnv(task=task, obs_type="pixels", render_size=size, camera=camera)
+    try:
+        if qpos.ndim != 2 or qpos.shape[1] != env.model.nq:
+            raise ValueError(f"physics_qpos of {task!r} must be (N, {env.model.nq}); got shape {qpos.shape}")
+        frames = np.empty((len(qpos), 3, *env.render_size), dtype=np.uint8)  # (N, 3, H, W)
+        for i, q in enumerate(qpos):
+            env.set_physics_state(q)
+            frames[i] = env.render_camera(camera).transpose(2, 0, 1)  # (H, W, 3) -> (3, H, W)
+        return frames
+    finally:
+        env.close()
