@@ -45,14 +45,12 @@ VARIANTS = {  # name -> ACT config fields
     "ACT k=25": {"chunk_size": 25},
     "ACT k=100": {"chunk_size": 100},
     "ACT k=100 without CVAE": {"chunk_size": 100, "use_vae": False},
-    "ACT k=100 from the top camera": {"chunk_size": 100, "features": "aloha_image",
-                                      "vision": {"widths": (16, 32, 64, 128), "blocks_per_stage": 1,
-                                                 "image_size": (48, 64), "crop_size": (48, 64), "random_crops": False}},
+    "ACT k=100 from the top camera": {"chunk_size": 100, "features": "aloha_image", "vision": "arm_pair"},
 }
 SWEEP = [name for name in VARIANTS if "camera" not in name]
 """The default variants: the k sweep and the no-CVAE run (the camera run, chapter 12's stretch, is asked for by name:
-ACT seeing the 48 x 64 "top" camera frame rendered from the stored states, plus qpos; ACT's trunk with chapter
-12's small widths, no crops as in ACT)."""
+ACT seeing the 48 x 64 "top" camera frame rendered from the stored states, plus qpos: the "arm_pair" vision
+preset, chapter 12's small widths without crops, as ACT trains)."""
 EXECUTORS = ("open-loop chunks (Ta=k)", "temporal ensembling m=0.01")
 BLOCK = 50
 """Seeds per cached evaluation block (the unit an interrupted evaluation resumes from)."""
@@ -84,7 +82,7 @@ def train_or_load(name: str, ts: int, args: argparse.Namespace, dataset):
     if "vision" in fields:
         from coursekit.nn.vision import VisionEncoderConfig
 
-        fields["vision"] = VisionEncoderConfig(**fields["vision"])
+        fields["vision"] = VisionEncoderConfig.preset(fields["vision"])
     build = lambda: make_policy("act", dataset, recipe="cpu", seed=ts, **fields)  # noqa: E731
     return load_or_train(run, build, args.steps, ts, args.threads, dataset.meta), run
 

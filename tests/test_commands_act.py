@@ -64,3 +64,17 @@ def test_eval_overrides_are_validated_and_policy_specific(cube_demos, tmp_path, 
     assert "--sampler ddpm does not apply to" in capsys.readouterr().err
     # the loaded checkpoint is untouched: overrides live in a copy
     assert json.loads((ckpt / "config.json").read_text())["config"]["ensemble_decay"] == 0.01
+
+
+def test_train_act_from_the_top_camera_then_eval(cube_demos, tmp_path):
+    ckpt = tmp_path / "act_camera"
+    assert main(["train", "--policy", "act", "--recipe", "cpu", "--features", "aloha_image", "--vision", "arm_pair",
+                 "--data", str(cube_demos), "--steps", "2", "--chunk-size", "10", "--out", str(ckpt), "--threads", "1",
+                 "--no-progress"]) == 0
+    config = json.loads((ckpt / "config.json").read_text())["config"]
+    assert (config["features"], config["obs_type"]) == ("aloha_image", "image")
+    assert tuple(config["vision"]["image_size"]) == (48, 64) and config["vision"]["random_crops"] is False
+    out = tmp_path / "eval.json"
+    assert main(["eval", str(ckpt), "--episodes", "1", "--max-steps", "5", "--threads", "1", "--json", str(out),
+                 "--no-progress"]) == 0
+    assert json.loads(out.read_text())["task"] == "transfer_cube"

@@ -73,7 +73,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--unet", default=None, help="U-Net size preset: cpu (default), paper_lowdim, paper_image")
     parser.add_argument("--down-dims", type=int_list_in(1, MAX_CHANNELS, MAX_LEVELS), default=None,
                         help=f"override the preset's U-Net channels, e.g. 32,64,128 (each at most {MAX_CHANNELS})")
-    parser.add_argument("--vision", default=None, help="image encoder preset for image features (pusht_image, aloha_image): cpu (default), resnet18, small "
+    parser.add_argument("--vision", default=None, help="image encoder preset for image features (pusht_image, aloha_image): cpu (default), resnet18, arm_pair, small "
                              "(96x96 frames encoded at 48x48: the CPU route of chapter 12)")
     parser.add_argument("--n-action-steps", type=int_in(1, MAX_CHUNK_SIZE), default=None,
                         help="Ta, actions executed per chunk (default: the policy's, 8 for diffusion/regression)")
