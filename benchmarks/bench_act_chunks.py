@@ -49,8 +49,8 @@ VARIANTS = {  # name -> ACT config fields
 }
 SWEEP = [name for name in VARIANTS if "camera" not in name]
 """The default variants: the k sweep and the no-CVAE run (the camera run, chapter 12's stretch, is asked for by name:
-ACT seeing the 48 x 64 "top" camera frame rendered from the stored states, plus qpos: the "arm_pair" vision
-preset, chapter 12's small widths without crops, as ACT trains)."""
+ACT seeing the 96 x 128 "top" camera frame rendered from the stored states, plus qpos: the "arm_pair" vision
+preset, narrow widths without crops, as ACT trains)."""
 EXECUTORS = ("open-loop chunks (Ta=k)", "temporal ensembling m=0.01")
 BLOCK = 50
 """Seeds per cached evaluation block (the unit an interrupted evaluation resumes from)."""

@@ -85,3 +85,11 @@ def test_temporal_ensembling_of_dict_observations_matches_the_array_path():
     assert seen == [np.uint8] * 6  # frames reach the policy as uint8, not as 0..255 floats
     with pytest.raises(ValueError, match="act expects obs of shape"):
         got.act({"agent_pos": low[0, :1], "image": frames[0, :1]})
+
+
+def test_the_arm_pair_preset_gives_act_a_6_by_8_grid_of_image_tokens():
+    from coursekit.policies.act import ImageTokens
+
+    config = VisionEncoderConfig.preset("arm_pair")
+    tokens, positions = ImageTokens(config, 32)(torch.zeros(2, 3, *config.image_size))
+    assert config.image_size == (96, 128) and tokens.shape == (2, 6 * 8, 32) and positions.shape == (6 * 8, 32)

@@ -73,7 +73,7 @@ def test_train_act_from_the_top_camera_then_eval(cube_demos, tmp_path):
                  "--no-progress"]) == 0
     config = json.loads((ckpt / "config.json").read_text())["config"]
     assert (config["features"], config["obs_type"]) == ("aloha_image", "image")
-    assert tuple(config["vision"]["image_size"]) == (48, 64) and config["vision"]["random_crops"] is False
+    assert tuple(config["vision"]["image_size"]) == (96, 128) and config["vision"]["random_crops"] is False
     out = tmp_path / "eval.json"
     assert main(["eval", str(ckpt), "--episodes", "1", "--max-steps", "5", "--threads", "1", "--json", str(out),
                  "--no-progress"]) == 0

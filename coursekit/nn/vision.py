@@ -88,12 +88,14 @@ class VisionEncoderConfig:
         """"cpu" (default, narrower), "resnet18" (the paper's widths 64/128/256/512) or "small" (the
         two-stage route of chapter 12: widths 16-128, one block per stage, 96x96 frames encoded at
         48x48 with 42x42 crops; about 6x the images per second of "cpu" on one core, bench_pixels) or
-        "arm_pair" (ACT from the arm pair's top camera, 'aloha_image': the small widths on whole 48x64
-        frames, no crops, as ACT trains)."""
+        "arm_pair" (ACT from the arm pair's top camera, 'aloha_image': whole 96x128 frames, no crops as
+        ACT trains, three stages of widths 16-64 so that ACT gets a 6 x 8 grid of image tokens; with the
+        fourth stage it would get 3 x 4, and from 48x64 frames 2 x 2, where a 4 cm cube is a pixel or two)."""
         small = dict(widths=(16, 32, 64, 128), blocks_per_stage=1)
         presets = {"cpu": cls(), "resnet18": cls(widths=(64, 128, 256, 512)),
                    "small": cls(**small, image_size=(48, 48), crop_size=(42, 42), frame_size=(96, 96)),
-                   "arm_pair": cls(**small, image_size=(48, 64), crop_size=(48, 64), random_crops=False)}
+                   "arm_pair": cls(widths=(16, 32, 64), blocks_per_stage=1, image_size=(96, 128), crop_size=(96, 128),
+                                   random_crops=False)}
         if name not in presets:
             raise ValueError(f"unknown vision preset {name!r}; expected one of {sorted(presets)}")
         return presets[name]
