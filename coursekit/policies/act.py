@@ -18,7 +18,8 @@ Departures from the original code, on purpose:
 - Observations: ``o_t`` is a low-dim feature vector of size Do (ALOHA: qpos (14) + the object
   poses the env exposes), projected to ONE token; the paper's token is qpos alone and the scene
   is seen through images (available here with ``obs_type="image"``: features 'aloha_image', the
-  arm pair's "top" camera rendered from the stored states beside qpos; one camera, not the paper's four).
+  arm pair's "top" camera rendered from the stored states beside qpos, at 96x128 with the "arm_pair"
+  preset where the paper's simulated tasks use 480x640).
 - The FULL decoder stack is used (the original keeps only the first decoder layer's output by
   a slip; see :mod:`coursekit.nn.act_transformer`).
 - The L1 term is the mean over NON-padded entries; the original multiplies by the mask and then
