@@ -37,6 +37,7 @@ CASES = [
     ("act_insertion", "ACT/ACT insertion strict success, shipped checkpoint, temporal ensembling m=0.01"),
     ("dp_transfer_cube", "ACT/DP transfer cube success (strict, DDIM-10, Ta=8)"),
     ("act_pusht", "ACT/ACT PushT score (mean of max coverage)"),
+    ("pusht_diffusion_pixels", "Pixels (PushT): two-stage route/shipped pixel checkpoint score, DDIM-10 (notebook 12)"),
 ]
 
 

@@ -95,6 +95,8 @@ def chunk_sweep(rows: dict[str, dict[str, Any]]) -> tuple[dict[str, list[Point]]
 SHIPPED_ROWS = {  # task -> [(head label, row key)]: every shipped checkpoint's protocol row (200 episodes)
     "PushT (score: mean max coverage)": [
         ("Diffusion Policy, DDIM-10", "Diffusion Policy/shipped checkpoint score, DDIM-10 (notebook 05)"),
+        ("Diffusion Policy from pixels, DDIM-10",
+         "Pixels (PushT): two-stage route/shipped pixel checkpoint score, DDIM-10 (notebook 12)"),
         ("flow matching, Euler-10", "Flow matching/shipped flow checkpoint score, Euler-10 (notebook 10)"),
         ("chunked regression", "Diffusion Policy/shipped regression checkpoint score (notebook 05)"),
         ("ACT, ensembling", "ACT/ACT PushT score (mean of max coverage)"),
