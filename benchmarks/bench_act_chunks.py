@@ -22,18 +22,22 @@ training seeds in the note.
 
 Runs and evaluations are cached under ``--out`` (never the repository) and resume: training from
 its state file (``coursekit.train_state``, rewritten every minute), evaluation per block of 50 seeds.
+Each run is evaluated as soon as it is trained, and a run whose evaluations are all kept in the
+ledger (``python -m benchmarks.ledger``) is neither trained nor loaded: rows over three training
+seeds can be recorded on a machine that trained none of them.
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 from pathlib import Path
 
 import numpy as np
 
 from benchmarks.protocol import add_protocol_args, protocol_seeds, t_estimate
-from benchmarks.resumable import cache_dir
+from benchmarks.resumable import cache_dir, evaluation_file, run_slug
 from coursekit.atomic import atomic_write_text
 
 SECTION = "Chunk ablation (arm pair)"
@@ -72,19 +76,23 @@ def demonstrations(out: Path):
     return ds
 
 
+def run_dir(out: Path, name: str, ts: int, steps: int) -> Path:
+    """The cache folder of variant ``name``, training seed ``ts``, ``steps`` optimiser steps."""
+    return out / f"{run_slug(name)}_seed{ts}_s{steps}"
+
+
 def train_or_load(name: str, ts: int, args: argparse.Namespace, dataset):
     """The variant ``name`` trained with seed ``ts`` for ``--steps`` (resumed or loaded from ``--out``)."""
-    from benchmarks.resumable import load_or_train, run_slug
+    from benchmarks.resumable import load_or_train
     from coursekit.policies import make_policy
 
-    run = args.out / f"{run_slug(name)}_seed{ts}_s{args.steps}"
     fields = dict(VARIANTS[name])
     if "vision" in fields:
         from coursekit.nn.vision import VisionEncoderConfig
 
         fields["vision"] = VisionEncoderConfig.preset(fields["vision"])
     build = lambda: make_policy("act", dataset, recipe="cpu", seed=ts, **fields)  # noqa: E731
-    return load_or_train(run, build, args.steps, ts, args.threads, dataset.meta), run
+    return load_or_train(run_dir(args.out, name, ts, args.steps), build, args.steps, ts, args.threads, dataset.meta)
 
 
 def executor_factory(executor: str, k: int):
@@ -96,18 +104,22 @@ def executor_factory(executor: str, k: int):
     return lambda predict_chunk: TemporalEnsemble(predict_chunk, 1, ensemble_decay=0.01)
 
 
-def evaluate_run(policy, run: Path, executor: str, seeds: list[int], dataset_meta: dict) -> dict:
-    """Strict success and highest stage per seed, evaluated in cached blocks of ``BLOCK`` seeds."""
+def evaluate_run(load, run: Path, executor: str, seeds: list[int], k: int, dataset) -> dict:
+    """Strict success and highest stage per seed of ``run``, in cached blocks of ``BLOCK`` seeds.
+
+    ``load()`` gives the trained policy (chunk size ``k``) and ``dataset()`` its demonstrations; either
+    is called only when a block is neither kept in the ledger nor cached.
+    """
     from coursekit.evaluate import evaluate_aloha
 
     tag = "open" if executor == EXECUTORS[0] else "te"
     out = {"seed": [], "strict": [], "stage": [], "seconds": 0.0}
     for i in range(0, len(seeds), BLOCK):
         block = seeds[i:i + BLOCK]
-        path = run / f"eval_{tag}_{block[0]}_{len(block)}.json"
+        path = evaluation_file(run, f"eval_{tag}_{block[0]}_{len(block)}.json")
         if not path.exists():
-            r = evaluate_aloha(policy, TASK, seeds=block, executor_factory=executor_factory(executor, policy.config.chunk_size),
-                               dataset_meta=dataset_meta, progress=False, max_steps=EPISODE_STEPS)
+            r = evaluate_aloha(load(), TASK, seeds=block, executor_factory=executor_factory(executor, k),
+                               dataset_meta=dataset().meta, progress=False, max_steps=EPISODE_STEPS)
             part = {"seed": block, "strict": (r.states[:, -1, 1] > 0.5).tolist(),
                     "stage": r.states[:, :, 0].max(axis=1).astype(int).tolist(), "seconds": r.seconds}
             atomic_write_text(path, json.dumps(part))  # a killed run leaves no half-written block
@@ -156,13 +168,18 @@ def main(argv: list[str] | None = None) -> None:
     from benchmarks.results import record as write
 
     record = (lambda *a, **k: None) if args.no_record else write
-    dataset = demonstrations(args.out)
+    dataset = functools.cache(lambda: demonstrations(args.out))  # collected only if something is trained
     for name in args.variants:
-        policies = {ts: train_or_load(name, ts, args, dataset) for ts in args.train_seeds}
-        for executor in EXECUTORS[:1] if VARIANTS[name]["chunk_size"] == 1 else EXECUTORS:
-            per_seed = {ts: evaluate_run(p, run, executor, seeds, dataset.meta) for ts, (p, run) in policies.items()}
-            summarise(name, executor, per_seed, args, record)
-
+        k = VARIANTS[name]["chunk_size"]
+        executors = EXECUTORS[:1] if k == 1 else EXECUTORS
+        per_seed: dict[str, dict[int, dict]] = {executor: {} for executor in executors}
+        for ts in args.train_seeds:  # each run evaluated once trained: a cut sweep keeps what it finished
+            load = functools.cache(lambda ts=ts: train_or_load(name, ts, args, dataset()))
+            run = run_dir(args.out, name, ts, args.steps)
+            for executor in executors:
+                per_seed[executor][ts] = evaluate_run(load, run, executor, seeds, k, dataset)
+        for executor in executors:
+            summarise(name, executor, per_seed[executor], args, record)
 
 if __name__ == "__main__":
     main()

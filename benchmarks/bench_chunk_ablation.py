@@ -26,6 +26,8 @@ Parts:
 
 Per-episode results go under ``--out``, a cache outside the repository: an existing run or
 evaluation is reused, and a killed training run resumes where it stopped (``benchmarks.resumable``).
+An evaluation kept in the repository's ledger (``python -m benchmarks.ledger``) is read from there,
+and its run is then neither trained nor loaded.
 """
 
 from __future__ import annotations
@@ -37,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.protocol import add_protocol_args, protocol_seeds, t_estimate
-from benchmarks.resumable import cache_dir, run_slug
+from benchmarks.resumable import cache_dir, evaluation_file, run_slug
 from coursekit.atomic import atomic_write_text
 
 SECTION = "Chunk ablation (PushT)"
@@ -63,8 +65,8 @@ def seed_text(seeds: list[int]) -> str:
     return f"{seeds[0]}-{seeds[-1]}"
 
 
-def evaluate_saved(policy, path: Path, seeds: list[int], meta: dict | None, sampling: dict) -> dict:
-    """Evaluate (or reuse ``path``): {"seeds", "max_reward", "success"} lists."""
+def evaluate_saved(load, path: Path, seeds: list[int], meta: dict | None, sampling: dict) -> dict:
+    """Reuse ``path``, or evaluate ``load()`` (called only then) into it: {"seeds", "max_reward", "success"} lists."""
     from coursekit.evaluate import evaluate_pusht
 
     if path.exists():
@@ -72,6 +74,7 @@ def evaluate_saved(policy, path: Path, seeds: list[int], meta: dict | None, samp
         if saved["seeds"] != seeds:
             raise ValueError(f"{path} holds other seeds ({seed_text(saved['seeds'])}); move it aside")
         return saved
+    policy = load()
     r = evaluate_pusht(policy, seeds=seeds, dataset_meta=meta, progress=False, **sampling)
     saved = {"seeds": seeds, "max_reward": r.max_reward.tolist(), "success": r.success.tolist(), "seconds": r.seconds,
              "n_action_steps": policy.config.n_action_steps, **{k: v for k, v in sampling.items()}}
@@ -97,7 +100,7 @@ def part_ta(args, seeds: list[int], rec) -> None:
                 atomic_write_text(out, json.dumps({"seeds": seeds, "max_reward": data["max_reward"].tolist(),
                                            "success": data["success"].tolist(), "seconds": float(data["seconds"]),
                                            "from": str(claims.relative_to(ROOT))}) + "\n")
-        saved = evaluate_saved(policy, args.out / f"{prefix}ta{ta}_{seeds[0]}_{len(seeds)}.json", seeds, meta, sampling)
+        saved = evaluate_saved(lambda: policy, args.out / f"{prefix}ta{ta}_{seeds[0]}_{len(seeds)}.json", seeds, meta, sampling)
         score, ok = mean_estimate(saved["max_reward"]), rate_estimate(np.asarray(saved["success"], dtype=bool))
         rec(f"{label} score, Ta={ta}", score,
             f"success {ok}; To={policy.config.n_obs_steps}, Tp={policy.config.horizon}; shipped checkpoint, one "
@@ -114,7 +117,7 @@ def run_dir(out: Path, name: str, ts: int, steps: int, data: Path) -> Path:
 
 
 def train_or_load(name: str, ts: int, args, dataset):
-    """The variant ``name`` trained with training seed ``ts`` (or loaded from ``--out``): (policy, run dir)."""
+    """The variant ``name`` trained with training seed ``ts`` (or loaded from ``--out``)."""
     from benchmarks.resumable import load_or_train
     from coursekit.nn.unet1d import UNet1DConfig
     from coursekit.policies import make_policy
@@ -125,7 +128,7 @@ def train_or_load(name: str, ts: int, args, dataset):
         cfg["unet"] = UNet1DConfig(**cfg["unet"])
     run = run_dir(args.out, name, ts, args.steps, args.data)
     build = lambda: make_policy(kind, dataset, features="pusht_keypoints", recipe="cpu", seed=ts, **cfg)  # noqa: E731
-    return load_or_train(run, build, args.steps, ts, args.threads, dataset.meta), run
+    return load_or_train(run, build, args.steps, ts, args.threads, dataset.meta)
 
 
 def data_label(meta: dict) -> str:
@@ -152,8 +155,9 @@ def part_train(args, seeds: list[int], rec) -> None:
             continue
         per_seed = []
         for ts in args.train_seeds:
-            policy, run = train_or_load(name, ts, args, dataset)
-            saved = evaluate_saved(policy, run / f"eval_{seeds[0]}_{len(seeds)}.json", seeds, dataset.meta, sampling)
+            run = run_dir(args.out, name, ts, args.steps, args.data)  # trained only if its evaluation is not kept
+            saved = evaluate_saved(lambda ts=ts: train_or_load(name, ts, args, dataset),
+                                   evaluation_file(run, f"eval_{seeds[0]}_{len(seeds)}.json"), seeds, dataset.meta, sampling)
             per_seed.append(np.asarray(saved["max_reward"], dtype=float))
             print(f"{name}, training seed {ts}: score {per_seed[-1].mean():.3f} "
                   f"(two-way {per_seed[-1][two].mean():.3f}, other {per_seed[-1][~two].mean():.3f})", flush=True)

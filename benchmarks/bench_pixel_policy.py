@@ -195,7 +195,7 @@ def part_policy(args: argparse.Namespace, record) -> None:
                            dataset.meta)
     training = read_checkpoint_info(run)["training"]
     seeds = list(range(100_000, 100_000 + args.episodes))
-    saved = evaluate_saved(policy, run / f"eval_{seeds[0]}_{len(seeds)}.json", seeds, dataset.meta, {})
+    saved = evaluate_saved(lambda: policy, run / f"eval_{seeds[0]}_{len(seeds)}.json", seeds, dataset.meta, {})
     est = mean_estimate(saved["max_reward"])
     label = f"DP from pixels, {args.route}{variant(args)[1]}"
     print(f"{label}: {est.value:.3f} [{est.lo:.3f}, {est.hi:.3f}] (n={est.n}); trained {training['steps']} steps in "
@@ -221,7 +221,7 @@ def ship(run: Path, seeds: list[int], meta: dict, cmd: str, note: str, record) -
     from coursekit.stats import mean_estimate
 
     copy_checkpoint_half(run, SHIPPED)
-    saved = evaluate_saved(load_checkpoint(SHIPPED, device="cpu"), run / f"eval_shipped_{seeds[0]}_{len(seeds)}.json",
+    saved = evaluate_saved(lambda: load_checkpoint(SHIPPED, device="cpu"), run / f"eval_shipped_{seeds[0]}_{len(seeds)}.json",
                            seeds, meta, {})
     est = mean_estimate(saved["max_reward"])
     print(f"shipped {SHIPPED.name} (float16): {est.value:.3f} [{est.lo:.3f}, {est.hi:.3f}] (n={est.n})")

@@ -7,6 +7,11 @@ policy, a head the package does not ship) calls :func:`train_steps`. The run tra
 every minute, so a killed run started again with the same arguments continues with the same bytes as
 an uninterrupted one; the state is removed once the checkpoint is written. A step budget rather
 than minutes keeps a result independent of what else shares the core.
+
+A machine's cache does not outlive it, and a sweep of fifteen runs outlives a working day: a finished
+run's evaluations (per-seed outcomes, a few kilobytes) are kept in the repository's ledger by
+``python -m benchmarks.ledger`` and read from there first (:func:`evaluation_file`), so a row over
+three training seeds can be recorded on a machine that trained none of them.
 """
 
 from __future__ import annotations
@@ -18,6 +23,10 @@ from typing import Callable
 
 CACHE_ROOT = Path(os.environ.get("XDG_CACHE_HOME", "~/.cache")).expanduser() / "coursekit"
 """Where the long benchmarks keep their runs, evaluations and data sets: never the repository."""
+
+
+LEDGER = Path(__file__).resolve().parent / "ledger"
+"""Finished runs' evaluations kept in the repository: ``LEDGER / <benchmark cache> / <run> / <file>``."""
 
 
 def cache_dir(name: str) -> Path:
@@ -33,6 +42,16 @@ def run_slug(name: str) -> str:
 def state_path(run: Path) -> Path:
     """The resume state of ``run``: ``run.parent / ".<run.name>.state.pt"``."""
     return run.parent / f".{run.name}.state.pt"
+
+
+def evaluation_file(run: Path, name: str, ledger: Path | None = None) -> Path:
+    """Where ``run``'s evaluation file ``name`` is read: the ledger's kept copy if there is one, else ``run / name``.
+
+    The ledger mirrors the cache: ``run = ~/.cache/coursekit/act_chunks/act-k-10_seed0_s7000`` is kept
+    as ``LEDGER / "act_chunks" / "act-k-10_seed0_s7000"``. A missing evaluation is made in the cache.
+    """
+    kept = (LEDGER if ledger is None else ledger) / run.parent.name / run.name / name
+    return kept if kept.is_file() else run / name
 
 
 def is_trained(run: Path) -> bool:
