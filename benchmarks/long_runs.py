@@ -1,20 +1,24 @@
-"""The long benchmarks as two queues, one per core: run them in pieces, on any day, until they are done.
+"""The long benchmarks still to run, as two queues, one per core: run them in pieces, on any day, until they are done.
 
-    .venv/bin/python -m benchmarks.long_runs a          # core 1: the budget curve, then person-like data
-    .venv/bin/python -m benchmarks.long_runs b          # core 2: RTC in its regime, ACT's k sweep, the pixel policy
+    .venv/bin/python -m benchmarks.long_runs a          # core 1: the three heads on person-like demonstrations
+    .venv/bin/python -m benchmarks.long_runs b          # core 2: ACT's k sweep, ACT from the camera, the end-to-end pixel run
     .venv/bin/python -m benchmarks.long_runs a --list   # the queue, one command per line
 
 Every step is a command of a resumable benchmark (``benchmarks/resumable.py``): a finished run is
 loaded from ``~/.cache/coursekit`` and an unfinished one continues where it stopped, so stopping a
 queue and starting it again costs at most a minute per core, and a queue run to the end twice
-trains nothing the second time. A ``train`` step trains one run (one variant, one training seed)
-and writes no row: a row over fewer training seeds than its benchmark names would be wrong in the
-table until the others are in. The ``record`` step after them writes the rows from the cache, and a
-``rows`` step is a benchmark whose one command is complete (an RTC sweep for one head, a pixel
-stage). ``--no-record`` (a queue run from a second working tree while the first is being edited)
-skips the record steps and passes ``--no-record`` to the rows steps; the same queue run later
-without it records everything from the cache in seconds. Shipping the pixel policy is a decision,
-not a step: once its row is in, ``bench_pixel_policy --only policy --route two-stage --ship``.
+trains nothing the second time. A ``train`` step trains and evaluates one run (one variant, one
+training seed) and writes no row: a row over fewer training seeds than its benchmark names would be
+wrong in the table until the others are in. The ``keep`` step after it copies the run's evaluations
+into the repository's ledger (``benchmarks/ledger.py``): commit them, and the run counts on the next
+machine too, whose cache starts empty. The ``record`` step writes the rows from the ledger and the
+cache in seconds, and a ``rows`` step is a benchmark whose one command is complete (ACT from the
+camera, the end-to-end pixel run). ``--no-record`` (a queue run from a second working tree while the
+first is being edited) skips the record steps and passes ``--no-record`` to the rows steps.
+
+Done and recorded (their rows name their commands): the budget curve (2000, 6000, 20 000 steps),
+RTC in its regime for both heads and the Tp = 32 flow head, stage 1 of the pixel route with and
+without crops, and the two-stage pixel policy (shipped).
 """
 
 from __future__ import annotations
@@ -44,37 +48,39 @@ def ablation(variants: list[str], steps: int, seeds, data: Path) -> list[str]:
             "--variants", *variants, "--threads", "1", "--data", str(data), "--name-budget"]
 
 
+def act_variant(name: str) -> list[str]:
+    return ["bench_act_chunks", "--steps", "7000", "--threads", "1", "--variants", name]
+
+
 def queue_a() -> list[tuple[str, list[str]]]:
-    """Issue 24's PushT runs: the budget curve at 20 000 steps, then the heads on person-like data."""
-    heads, person = ["Diffusion Policy", "chunked regression"], ["Diffusion Policy", "chunked regression", "single-step"]
-    steps: list[tuple[str, list[str]]] = [("data", ["collect", str(DATA), ""]), ("data", ["collect", str(PERSON), "person"])]
-    steps += [("train", ablation([v], 20000, [s], DATA)) for v in heads for s in SEEDS]
-    steps += [("record", ablation(heads, 20000, SEEDS, DATA))]
-    steps += [("train", ablation([v], 6000, [s], PERSON)) for v in person for s in SEEDS]
+    """Issue 24's PushT runs: the three heads on person-like demonstrations, step-matched."""
+    person = ["Diffusion Policy", "chunked regression", "single-step"]
+    steps: list[tuple[str, list[str]]] = [("data", ["collect", str(PERSON), "person"])]
+    for variant in person:
+        for s in SEEDS:
+            steps += [("train", ablation([variant], 6000, [s], PERSON)), ("keep", ["ledger"])]
     steps += [("record", ablation(person, 6000, SEEDS, PERSON))]
     return steps
 
 
 def queue_b() -> list[tuple[str, list[str]]]:
-    """Issues 25, 24 (item 3) and 26: RTC in its regime and the Tp = 32 head, ACT's k sweep, the pixel policy."""
-    rtc = ["bench_rtc_regime", "--strategies", "rtc,async"]
-    pixels = ["bench_pixel_policy", "--threads", "1", "--pretrain-steps", "3000", "--data", str(DATA)]
-    steps = [("rows", [*rtc, "--heads", "dp", "--d", "1"]), ("rows", [*rtc, "--heads", "flow", "--d", "2,1"]),
-             ("head", ["train_head", "flow-tp32", "--data", str(DATA), "--no-progress"]),
-             ("rows", [*rtc, "--heads", "flow-tp32", "--d", "4,6,8"])]
-    act = ["bench_act_chunks", "--steps", "7000", "--threads", "1"]  # the course's second claim before pixels
-    steps += [("train", [*act, "--train-seeds", str(s)]) for s in SEEDS]
-    steps += [("record", [*act, "--train-seeds", *map(str, SEEDS)])]
-    steps += [("rows", [*act, "--train-seeds", "0", "--variants", "ACT k=100 from the top camera"])]  # 26's stretch
-    steps += [("rows", [*pixels, "--only", "pretrain"]), ("rows", [*pixels, "--only", "pretrain", "--no-random-crops"]),
-              ("rows", [*pixels, "--only", "policy", "--route", "two-stage", "--policy-steps", "19259"]),
-              ("rows", [*pixels, "--only", "policy", "--route", "end-to-end", "--policy-steps",
-                        str(PIXEL_STEPS_END_TO_END)])]
+    """Issues 24 (item 3) and 26: ACT's k sweep and no-CVAE run, ACT from the camera, the end-to-end pixel run."""
+    from benchmarks.bench_act_chunks import SWEEP
+
+    steps: list[tuple[str, list[str]]] = []
+    for variant in SWEEP:  # variant by variant, so that a cut queue leaves whole rows behind
+        for s in SEEDS:
+            steps += [("train", [*act_variant(variant), "--train-seeds", str(s)]), ("keep", ["ledger"])]
+    steps += [("record", [*act_variant(v), "--train-seeds", *map(str, SEEDS)]) for v in SWEEP]
+    steps += [("rows", [*act_variant("ACT k=100 from the top camera"), "--train-seeds", "0"])]  # 26's stretch
+    steps += [("data", ["collect", str(DATA), ""]),
+              ("rows", ["bench_pixel_policy", "--threads", "1", "--pretrain-steps", "3000", "--data", str(DATA),
+                        "--only", "policy", "--route", "end-to-end", "--policy-steps", str(PIXEL_STEPS_END_TO_END)])]
     return steps
 
 
 QUEUES = {"a": queue_a, "b": queue_b}
-SKIPPED = {"data": lambda step: f"{step[1]} exists", "head": lambda step: f"head {step[1]} is trained",
+SKIPPED = {"data": lambda step: f"{step[1]} exists",
            "record": lambda step: f"{step[0]}: recording skipped (--no-record)"}
 """Why a step of each kind that can be skipped was, for the log."""
 ROOT = Path(__file__).resolve().parents[1]
@@ -88,12 +94,8 @@ def command(kind: str, args: list[str], no_record: bool) -> list[str] | None:
             return None
         return ["coursekit", "collect", "pusht", "--episodes", "400", "--seed", "0", "--action-noise", "0,5",
                 *(["--style", style] if style else []), "--out", str(out)]
-    if kind == "head":
-        from benchmarks.resumable import is_trained
-        from benchmarks.train_head import HEADS, TRAINED_HEADS
-
-        if is_trained(TRAINED_HEADS / HEADS[args[1]]["dir"]):
-            return None
+    if kind == "keep":
+        return [sys.executable, "-m", "benchmarks.ledger"]
     if kind == "record" and no_record:
         return None
     tail = ["--no-record"] if kind == "train" or (no_record and kind == "rows") else []
@@ -102,7 +104,7 @@ def command(kind: str, args: list[str], no_record: bool) -> list[str] | None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("queue", choices=sorted(QUEUES), help="a: issue 24's PushT runs; b: RTC, ACT's k sweep, pixels")
+    parser.add_argument("queue", choices=sorted(QUEUES), help="a: person-like PushT runs; b: ACT's k sweep, the camera, pixels")
     parser.add_argument("--list", action="store_true", help="print the queue's commands and stop")
     parser.add_argument("--no-record", action="store_true", help="write no rows (record steps are skipped)")
     args = parser.parse_args(argv)

@@ -6,7 +6,8 @@ import pytest
 
 import benchmarks.long_runs as lr
 from benchmarks.bench_chunk_ablation import VARIANTS
-from benchmarks.bench_latency import HEADS as LATENCY_HEADS
+from benchmarks.bench_act_chunks import SWEEP
+from benchmarks.bench_act_chunks import VARIANTS as ACT_VARIANTS
 
 
 @pytest.mark.parametrize("queue", sorted(lr.QUEUES))
@@ -20,10 +21,10 @@ def test_train_steps_never_record_and_name_what_exists(queue):
         if kind == "record":
             assert "--no-record" not in cmd
         if "--variants" in step:
-            names = step[step.index("--variants") + 1:step.index("--threads")]
-            assert all(any(n in v for v in VARIANTS) for n in names), names
-        if "--heads" in step:
-            assert all(h in LATENCY_HEADS for h in step[step.index("--heads") + 1].split(","))
+            rest = step[step.index("--variants") + 1:]
+            names = rest[:next((i for i, a in enumerate(rest) if a.startswith("--")), len(rest))]
+            known = ACT_VARIANTS if step[0] == "bench_act_chunks" else VARIANTS
+            assert names and all(any(n in v for v in known) for n in names), names
 
 
 def test_no_record_skips_the_record_steps_and_passes_the_flag_on():
@@ -38,4 +39,18 @@ def test_a_failing_step_stops_the_queue(monkeypatch):
     calls = []
     monkeypatch.setattr(lr.subprocess, "call", lambda cmd, cwd: calls.append(cmd) or 3)
     assert lr.main(["b", "--no-record"]) == 3
-    assert len(calls) == 1 and calls[0][2] == "benchmarks.bench_rtc_regime"
+    assert len(calls) == 1 and calls[0][2] == "benchmarks.bench_act_chunks"
+
+
+def test_every_train_step_is_followed_by_keeping_its_evaluations():
+    for queue in lr.QUEUES.values():
+        steps = queue()
+        for (kind, _), (after, _) in zip(steps, steps[1:]):
+            if kind == "train":
+                assert after == "keep"
+
+
+def test_the_k_sweep_runs_variant_by_variant_over_all_seeds():
+    trains = [step for kind, step in lr.queue_b() if kind == "train"]
+    order = [(step[step.index("--variants") + 1], int(step[-1])) for step in trains]
+    assert order == [(v, s) for v in SWEEP for s in lr.SEEDS]
