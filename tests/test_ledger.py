@@ -79,3 +79,31 @@ def test_rows_are_recorded_from_kept_evaluations_without_training(tmp_path, monk
     assert value == 62.5 and k["n"] == 8  # 5 of 8 pooled over both training seeds
     assert k["interval"] == [round(100 * x, 1) for x in wilson_interval(5, 8)]
     assert "per seed: 75.0 %, 50.0 %" in k["note"]
+
+
+def _sweep_rows():
+    from coursekit.viz.measured import load_rows
+
+    return sorted(load_rows(bac.SECTION).values(), key=lambda r: r["name"])
+
+
+def test_every_recorded_k_sweep_row_is_what_its_kept_evaluations_say():
+    """A row of the arm-pair sweep recomputed from the ledger: pooled strict success and n (rows recorded
+    from a cache whose evaluations were never kept are allowed, but then all of their files are absent)."""
+    import re
+
+    from benchmarks.resumable import LEDGER, run_slug
+
+    for row in _sweep_rows():
+        name, executor = row["name"].removesuffix(": strict success").rsplit(", ", 1)
+        tag = "open" if executor == bac.EXECUTORS[0] else "te"
+        steps = int(re.search(r"--steps (\d+)", row["command"]).group(1))
+        seeds = [int(s) for s in re.search(r"training seeds \[([\d, ]+)\]", row["note"]).group(1).split(", ")]
+        runs = [LEDGER / "act_chunks" / f"{run_slug(name)}_seed{ts}_s{steps}" for ts in seeds]
+        files = [sorted(run.glob(f"eval_{tag}_*.json")) for run in runs]
+        if not any(files):
+            continue
+        assert all(files), f"{row['name']}: some training seeds' evaluations are kept, not all: {runs}"
+        strict = [s for fs in files for f in fs for s in json.loads(f.read_text())["strict"]]
+        assert len(strict) == row["n"], row["name"]
+        assert round(100 * sum(strict) / len(strict), 1) == row["value"], row["name"]
