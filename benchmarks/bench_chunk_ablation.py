@@ -210,6 +210,10 @@ def main(argv: list[str] | None = None) -> int:
         cmd += f" --train-seeds {' '.join(map(str, args.train_seeds))} --steps {args.steps}"
         cmd += "".join(f" --variants '{v}'" if i == 0 else f" '{v}'" for i, v in enumerate(args.variants))
         cmd += " --name-budget" if args.name_budget else ""
+        if args.data.name != DATA.name:  # the planner's data are the default; other demonstrations are named
+            home = str(Path.home())
+            data = str(args.data.resolve())
+            cmd += f" --data {'~' + data[len(home):] if data.startswith(home + '/') else data}"
 
     def rec(name, est, note):
         value, lo, hi, n = (est.value, est.lo, est.hi, est.n) if hasattr(est, "value") else est

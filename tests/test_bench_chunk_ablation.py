@@ -21,3 +21,18 @@ def test_rows_on_person_like_demonstrations_are_named_apart():
     assert bca.data_label({}) == ""
     assert bca.data_label({"expert_style": None}) == ""
     assert bca.data_label({"expert_style": {"choice_tolerance": 0.3}}) == ", person-like demonstrations"
+
+
+def test_a_row_on_other_demonstrations_names_them_in_its_command(tmp_path, monkeypatch):
+    import benchmarks.results
+
+    commands = []
+    monkeypatch.setattr(benchmarks.results, "record", lambda section, name, value, unit, cmd, **k: commands.append(cmd))
+    monkeypatch.setattr(bca, "part_train", lambda args, seeds, rec: rec("x", (0.5, 0.4, 0.6, 3), "note"))
+    person = tmp_path / "pusht_400ep_seed0_noise0-5_person.npz"
+    person.write_bytes(b"")
+    for data in (person, tmp_path / bca.DATA.name):
+        data.touch()
+        bca.main(["--only", "train", "--steps", "6000", "--data", str(data), "--out", str(tmp_path / "runs")])
+    assert commands[0].endswith(f" --data {person}")  # reproduces the row: the same file
+    assert "--data" not in commands[1]  # the planner's demonstrations are the default
