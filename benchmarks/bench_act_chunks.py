@@ -181,5 +181,6 @@ def main(argv: list[str] | None = None) -> None:
         for executor in executors:
             summarise(name, executor, per_seed[executor], args, record)
 
+
 if __name__ == "__main__":
     main()

@@ -17,7 +17,7 @@ import argparse
 import filecmp
 from pathlib import Path
 
-from benchmarks.resumable import CACHE_ROOT, LEDGER, is_trained
+from benchmarks.resumable import CACHE_ROOT, LEDGER, is_trained, kept_file
 from coursekit.atomic import atomic_write_text
 
 BENCHES = ("act_chunks", "chunk_ablation")
@@ -30,7 +30,7 @@ def pending(cache_root: Path = CACHE_ROOT, ledger: Path = LEDGER) -> tuple[list[
     for bench in BENCHES:
         for run in sorted(p for p in (cache_root / bench).glob("*") if p.is_dir() and is_trained(p)):
             for src in sorted(run.glob("eval_*.json")):
-                dst = ledger / bench / run.name / src.name
+                dst = kept_file(run, src.name, ledger)
                 if not dst.exists():
                     new.append((src, dst))
                 elif not filecmp.cmp(src, dst, shallow=False):

@@ -44,13 +44,21 @@ def state_path(run: Path) -> Path:
     return run.parent / f".{run.name}.state.pt"
 
 
+def kept_file(run: Path, name: str, ledger: Path | None = None) -> Path:
+    """Where the ledger keeps ``run``'s evaluation file ``name`` (whether or not it is kept yet).
+
+    The ledger mirrors the cache: ``run = ~/.cache/coursekit/act_chunks/act-k-10_seed0_s7000`` is kept
+    as ``LEDGER / "act_chunks" / "act-k-10_seed0_s7000"`` (``ledger``: another root, default :data:`LEDGER`).
+    """
+    return (LEDGER if ledger is None else ledger) / run.parent.name / run.name / name
+
+
 def evaluation_file(run: Path, name: str, ledger: Path | None = None) -> Path:
     """Where ``run``'s evaluation file ``name`` is read: the ledger's kept copy if there is one, else ``run / name``.
 
-    The ledger mirrors the cache: ``run = ~/.cache/coursekit/act_chunks/act-k-10_seed0_s7000`` is kept
-    as ``LEDGER / "act_chunks" / "act-k-10_seed0_s7000"``. A missing evaluation is made in the cache.
+    A missing evaluation is made in the cache.
     """
-    kept = (LEDGER if ledger is None else ledger) / run.parent.name / run.name / name
+    kept = kept_file(run, name, ledger)
     return kept if kept.is_file() else run / name
 
 

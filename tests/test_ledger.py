@@ -92,14 +92,14 @@ def test_every_recorded_k_sweep_row_is_what_its_kept_evaluations_say():
     from a cache whose evaluations were never kept are allowed, but then all of their files are absent)."""
     import re
 
-    from benchmarks.resumable import LEDGER, run_slug
+    from benchmarks.resumable import LEDGER
 
     for row in _sweep_rows():
         name, executor = row["name"].removesuffix(": strict success").rsplit(", ", 1)
         tag = "open" if executor == bac.EXECUTORS[0] else "te"
         steps = int(re.search(r"--steps (\d+)", row["command"]).group(1))
         seeds = [int(s) for s in re.search(r"training seeds \[([\d, ]+)\]", row["note"]).group(1).split(", ")]
-        runs = [LEDGER / "act_chunks" / f"{run_slug(name)}_seed{ts}_s{steps}" for ts in seeds]
+        runs = [bac.run_dir(LEDGER / "act_chunks", name, ts, steps) for ts in seeds]
         files = [sorted(run.glob(f"eval_{tag}_*.json")) for run in runs]
         if not any(files):
             continue
