@@ -10,8 +10,8 @@ import pytest
 matplotlib.use("Agg")
 
 from coursekit.viz.measured import (  # noqa: E402
-    DATA_SETS, PIXEL_ROUTES, SHIPPED_ROWS, budget_curve, by_data_set, chunk_sweep, load_rows, plot_points,
-    side_by_side)
+    DATA_SETS, PIXEL_ROUTES, SHIPPED_ROWS, budget_curve, by_data_set, chunk_sweep, chunk_sweep_seeds, load_rows, per_seed,
+    plot_points, side_by_side)
 
 
 def row(section, name, value, interval=None, n=None, unit=""):
@@ -55,6 +55,18 @@ def test_chunk_sweep_in_fractions_with_the_no_cvae_point_apart():
     assert sweep["open-loop chunks (Ta=k)"] == [pytest.approx((1, 0.10, 0.079, 0.126, 600)),
                                                 pytest.approx((10, 0.80, 0.766, 0.83, 600))]
     assert no_vae["open-loop chunks (Ta=k)"] == pytest.approx((100, 0.85, 0.82, 0.876, 600))
+
+
+def test_chunk_sweep_seeds_reads_each_training_seed_from_the_note_as_it_is_written():
+    rows = {**ROWS}
+    rows["e"] = {**ROWS["e"], "note": "training seeds [0, 1, 2] (per seed: 40.0 %, 16.5 %, 16.5 %; t-interval over "
+                                      "seeds [-9.4, 58.0] %); 200 protocol seeds each"}
+    rows["g"] = {**ROWS["g"], "note": "training seeds [0] (per seed: 85.0 %; t-interval ...)"}
+    assert chunk_sweep_seeds(rows) == {
+        ("open-loop chunks (Ta=k)", False): [(10, pytest.approx([0.40, 0.165, 0.165]))],  # k = 1 has no note: no dots
+        ("open-loop chunks (Ta=k)", True): [(100, pytest.approx([0.85]))]}
+    pushT = {"note": "mean over training seeds [0, 1, 2] (per seed: 0.702, -0.633, 0.801; sd 0.084)"}
+    assert per_seed(pushT) == [0.702, -0.633, 0.801] and per_seed({"note": "no seeds here"}) == []
 
 
 def test_load_rows_filters_a_section_and_is_empty_without_a_table(tmp_path):

@@ -10,6 +10,7 @@ readers return nothing and the figures say where the rows come from.
     budget_curve(rows)        variant -> [(steps, value, lo, hi, n)]   (bench_chunk_ablation)
     by_data_set(rows, steps)  variant -> [(data set, value, lo, hi, n)]: the heads step for step on each data set
     chunk_sweep(rows)         executor -> [(k, value, lo, hi, n)], and the no-CVAE rows (bench_act_chunks)
+    chunk_sweep_seeds(rows)   (executor, without CVAE?) -> [(k, each training seed's value)]: the spread a pooled interval hides
     side_by_side(rows)        task -> [(head, value, lo, hi, n)]: the shipped checkpoints (chapter 9)
     side_by_side(rows, PIXEL_ROUTES)  the same for chapter 12: the pixel routes beside the keypoint policy
     plot_points(ax, pts, ...) one series with its interval bars
@@ -31,6 +32,7 @@ _DATA = re.compile(r"^(?P<variant>.+?) \(To=.*\) score, (?P<seeds>\d+) training 
                    r"(?P<person>, person-like demonstrations)?$")
 DATA_SETS = ("scripted planner", "person-like")
 """The PushT demonstration sets of ``by_data_set``, in x order (``coursekit collect pusht`` without / with ``--style person``)."""
+_PER_SEED = re.compile(r"per seed: (?P<values>-?[\d.]+(?: %)?(?:, -?[\d.]+(?: %)?)*)")
 _CHUNK = re.compile(r"^ACT k=(?P<k>\d+)(?P<novae> without CVAE)?, (?P<executor>.+): strict success$")
 
 
@@ -90,6 +92,27 @@ def chunk_sweep(rows: dict[str, dict[str, Any]]) -> tuple[dict[str, list[Point]]
             else:
                 sweep.setdefault(m["executor"], []).append(point)
     return {e: sorted(p) for e, p in sorted(sweep.items())}, no_vae
+
+
+def per_seed(row: dict[str, Any], scale: float = 1.0) -> list[float]:
+    """Each training seed's value, read from the row's note ("per seed: 40.0 %, 16.5 %, ..."), times ``scale``; [] when none."""
+    m = _PER_SEED.search(row.get("note") or "")
+    return [float(v.rstrip(" %")) * scale for v in m["values"].split(", ")] if m else []
+
+
+def chunk_sweep_seeds(rows: dict[str, dict[str, Any]]) -> dict[tuple[str, bool], list[tuple[int, list[float]]]]:
+    """(executor, without CVAE?) -> [(k, each training seed's strict success as a fraction)], by k.
+
+    The rows of :func:`chunk_sweep` pool the seeds' episodes into one Wilson interval, which says how
+    well the 600 episodes pin the pooled rate, not how much the rate moves from one training seed to
+    the next; these points show the latter.
+    """
+    out: dict[tuple[str, bool], list[tuple[int, list[float]]]] = {}
+    for row in rows.values():
+        m = _CHUNK.match(row["name"]) if row["section"] == "Chunk ablation (arm pair)" else None
+        if m and per_seed(row):
+            out.setdefault((m["executor"], bool(m["novae"])), []).append((int(m["k"]), per_seed(row, 0.01)))
+    return {key: sorted(points) for key, points in sorted(out.items())}
 
 
 SHIPPED_ROWS = {  # task -> [(head label, row key)]: every shipped checkpoint's protocol row (200 episodes)
