@@ -12,7 +12,8 @@ A tag names the row by its key ``Section/name`` or by its name alone when no oth
 name. It binds the *figure* that ends right before it: a number, an optional ``%`` or unit and an
 optional interval ``[lo, hi]``. ``row`` compares the figure with the row's value (and interval) at
 the decimals written; ``| note: WORDS`` compares it with the numbers of the clause of the row's
-note (between semicolons) that contains WORDS. A number written with ``%`` is compared in percent (94.5 %
+note (between semicolons) that contains WORDS; a list of decimals ("40.0, 16.5, 16.5 %") must be a
+run of those numbers in their order. A number written with ``%`` is compared in percent (94.5 %
 against a value 0.945, or against 94.5 when the row's unit is ``%``), one without it as a
 fraction (0.96 against 96 %). A number written without a sign is compared with the row's
 magnitude (prose says "0.041 below"). ``cite`` marks a literature figure (name the paper or data
@@ -161,6 +162,12 @@ def _values_of(row: dict, selector: str | None) -> tuple[list[float], bool, list
     return [_float(x) for x in re.findall(NUM, clause)], "%" in clause, None
 
 
+def _in_order(written: list[str], pct: bool, values: list[float], in_pct: bool) -> bool:
+    """Whether the numbers ``written`` equal consecutive ``values`` in order."""
+    return any(all(_close(w, pct, v, in_pct, signed=False) for w, v in zip(written, values[i:i + len(written)]))
+               for i in range(len(values) - len(written) + 1))
+
+
 def _check_row_tag(body: str, fig: re.Match, table: dict, sentence: str) -> list[str]:
     """Problems with one ``row`` tag and the figure it binds."""
     key, _, selector = (part.strip() for part in body.partition("|"))
@@ -176,10 +183,14 @@ def _check_row_tag(body: str, fig: re.Match, table: dict, sentence: str) -> list
         return [f"the note of {key!r} has no {selector[5:].strip()!r}"]
     pct = bool(fig["pct"] or fig["lopct"] or fig["hipct"])
     problems = []
-    for written in re.findall(NUM, fig["num"] or ""):
+    shown = f"value {row['value']!r} {row.get('unit', '')}".strip() if not selector else selector
+    written_all = re.findall(NUM, fig["num"] or "")
+    for written in written_all:
         if not any(_close(written, pct, v, in_pct, signed=False) for v in values):
-            shown = f"value {row['value']!r} {row.get('unit', '')}".strip() if not selector else selector
             problems.append(f"{written}{' %' if pct else ''} is not {key!r} ({shown}: {values})")
+    if len(written_all) > 1 and not problems and not _in_order(written_all, pct, values, in_pct):
+        # a list ("per seed: 40.0, 16.5, 16.5 %") is the row's list, in its order, not numbers found anywhere in it
+        problems.append(f"{', '.join(written_all)} is not a run of {key!r} in order ({shown}: {values})")
     if fig["lo"]:
         bounds = interval if interval is not None else values
         for written in (fig["lo"], fig["hi"]):

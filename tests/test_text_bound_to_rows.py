@@ -116,6 +116,8 @@ TOY = {"S/score": {"section": "S", "name": "score", "value": 0.945, "unit": "", 
     ("success 0.936<!-- row: score | note: success -->", False),
     ("0.788, 0.793<!-- row: score | note: per seed -->", True),
     ("0.788, 0.794<!-- row: score | note: per seed -->", False),
+    ("0.793, 0.788<!-- row: score | note: per seed -->", False),  # a list is the row's list, in its order
+    ("0.935, 0.788<!-- row: score -->", False),
     ("0.935<!-- row: score | note: no such words -->", False),
     ("87.6 %<!-- cite: LeRobot PR #319, 500 episodes -->", True),
     ("87.6 %<!-- cite: x -->", False),
