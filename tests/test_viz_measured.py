@@ -10,7 +10,8 @@ import pytest
 matplotlib.use("Agg")
 
 from coursekit.viz.measured import (  # noqa: E402
-    DATA_SETS, PIXEL_ROUTES, SHIPPED_ROWS, budget_curve, by_data_set, chunk_sweep, chunk_sweep_seeds, load_rows, per_seed,
+    DATA_SETS, PIXEL_ROUTES, SHIPPED_ROWS, budget_curve, by_data_set, chunk_sweep, chunk_sweep_seeds, leads_by_data_set, load_rows,
+    per_seed,
     plot_points, side_by_side)
 
 
@@ -47,6 +48,20 @@ def test_by_data_set_pairs_each_head_across_the_two_demonstration_sets_at_one_bu
     assert DATA_SETS == ("scripted planner", "person-like")
     assert by_data_set(rows) == {"Diffusion Policy DDIM-10": [(0, 0.79, 0.78, 0.80, 600), (1, 0.70, 0.65, 0.75, 600)]}
     assert by_data_set(rows, steps=2000) == {"Diffusion Policy DDIM-10": [(0, 0.35, 0.32, 0.38, 600)]}
+
+
+def test_leads_by_data_set_pairs_dps_lead_per_regressor_and_kind_of_start_across_the_sets():
+    name = "DP DDIM-10 minus single-step regression, 3 training seed(s), {steps} steps{person}, {starts} starts"
+    rows = {str(i): row("Chunk ablation (PushT)", name.format(steps=steps, person=person, starts=starts), value,
+                        [value - 0.1, value + 0.1], 234)
+            for i, (steps, person, starts, value) in enumerate([
+                (6000, "", "two-way", -0.04), (6000, ", person-like demonstrations", "two-way", 0.10),
+                (6000, ", person-like demonstrations", "other", 0.01), (20000, "", "two-way", 0.09),
+                (6000, ", person-like demonstrations", "all", 0.05)])}  # all starts and another budget: not here
+    assert leads_by_data_set(rows) == {
+        "minus single-step regression, other starts": [pytest.approx((1, 0.01, -0.09, 0.11, 234))],
+        "minus single-step regression, two-way starts": [pytest.approx((0, -0.04, -0.14, 0.06, 234)),
+                                                         pytest.approx((1, 0.10, 0.0, 0.2, 234))]}
 
 
 def test_chunk_sweep_in_fractions_with_the_no_cvae_point_apart():

@@ -9,6 +9,7 @@ readers return nothing and the figures say where the rows come from.
     load_rows(section)        {key: row} of one section (all sections when None)
     budget_curve(rows)        variant -> [(steps, value, lo, hi, n)]   (bench_chunk_ablation)
     by_data_set(rows, steps)  variant -> [(data set, value, lo, hi, n)]: the heads step for step on each data set
+    leads_by_data_set(rows, steps)  "minus <head>, <starts>" -> [(data set, DP's paired lead, lo, hi, n)]
     chunk_sweep(rows)         executor -> [(k, value, lo, hi, n)], and the no-CVAE rows (bench_act_chunks)
     chunk_sweep_seeds(rows)   (executor, without CVAE?) -> [(k, each training seed's value)]: the spread a pooled interval hides
     side_by_side(rows)        task -> [(head, value, lo, hi, n)]: the shipped checkpoints (chapter 9)
@@ -33,6 +34,8 @@ _DATA = re.compile(r"^(?P<variant>.+?) \(To=.*\) score, (?P<seeds>\d+) training 
 DATA_SETS = ("scripted planner", "person-like")
 """The PushT demonstration sets of ``by_data_set``, in x order (``coursekit collect pusht`` without / with ``--style person``)."""
 _PER_SEED = re.compile(r"per seed: (?P<values>-?[\d.]+(?: %)?(?:, -?[\d.]+(?: %)?)*)")
+_LEAD = re.compile(r"^DP DDIM-10 minus (?P<other>.+?), (?P<seeds>\d+) training seed\(s\), (?P<steps>\d+) steps"
+                   r"(?P<person>, person-like demonstrations)?, (?P<starts>two-way|other) starts$")
 _CHUNK = re.compile(r"^ACT k=(?P<k>\d+)(?P<novae> without CVAE)?, (?P<executor>.+): strict success$")
 
 
@@ -92,6 +95,22 @@ def chunk_sweep(rows: dict[str, dict[str, Any]]) -> tuple[dict[str, list[Point]]
             else:
                 sweep.setdefault(m["executor"], []).append(point)
     return {e: sorted(p) for e, p in sorted(sweep.items())}, no_vae
+
+
+def leads_by_data_set(rows: dict[str, dict[str, Any]], steps: int = 6000) -> dict[str, list[Point]]:
+    """"minus <head>, <two-way|other> starts" -> [(index into DATA_SETS, DP's lead, lo, hi, episodes)], by data set.
+
+    Reads the paired rows "DP DDIM-10 minus <head>, <k> training seed(s), <N> steps[, person-like
+    demonstrations], <two-way|other> starts" of ``bench_chunk_ablation --name-budget``: Diffusion
+    Policy's score minus the regressor's, training seed by training seed, on the starts where the
+    expert's first decision is a coin toss between the two ways round the T and on the others.
+    """
+    out: dict[str, list[Point]] = {}
+    for row in rows.values():
+        m = _LEAD.match(row["name"]) if row["section"] == "Chunk ablation (PushT)" else None
+        if m and int(m["steps"]) == steps:
+            out.setdefault(f"minus {m['other']}, {m['starts']} starts", []).append(_point(int(bool(m["person"])), row))
+    return {label: sorted(p) for label, p in sorted(out.items())}
 
 
 def per_seed(row: dict[str, Any], scale: float = 1.0) -> list[float]:
