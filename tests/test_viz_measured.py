@@ -10,9 +10,8 @@ import pytest
 matplotlib.use("Agg")
 
 from coursekit.viz.measured import (  # noqa: E402
-    DATA_SETS, PIXEL_ROUTES, SHIPPED_ROWS, budget_curve, by_data_set, chunk_sweep, chunk_sweep_seeds, leads_by_data_set, load_rows,
-    per_seed,
-    plot_points, side_by_side)
+    DATA_SETS, PIXEL_ROUTES, SHIPPED_ROWS, budget_curve, by_data_set, chunk_sweep, chunk_sweep_seeds,
+    leads_by_data_set, load_rows, per_seed, plot_points, side_by_side)
 
 
 def row(section, name, value, interval=None, n=None, unit=""):

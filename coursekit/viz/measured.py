@@ -129,8 +129,9 @@ def chunk_sweep_seeds(rows: dict[str, dict[str, Any]]) -> dict[tuple[str, bool],
     out: dict[tuple[str, bool], list[tuple[int, list[float]]]] = {}
     for row in rows.values():
         m = _CHUNK.match(row["name"]) if row["section"] == "Chunk ablation (arm pair)" else None
-        if m and per_seed(row):
-            out.setdefault((m["executor"], bool(m["novae"])), []).append((int(m["k"]), per_seed(row, 0.01)))
+        values = per_seed(row, 0.01) if m else []  # stored in %
+        if values:
+            out.setdefault((m["executor"], bool(m["novae"])), []).append((int(m["k"]), values))
     return {key: sorted(points) for key, points in sorted(out.items())}
 
 
