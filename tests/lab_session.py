@@ -111,6 +111,11 @@ def _stop(server: LabServer) -> None:
         server.proc.wait(timeout=5)
 
 
+def exercise_mode() -> str:
+    """Which exercise code the lab's kernels run: COURSEKIT_EXERCISES, else the worked solutions."""
+    return os.environ.get("COURSEKIT_EXERCISES", "solutions")
+
+
 @contextlib.contextmanager
 def lab_server(tmp: Path, notebooks: list[Path], env_extra: dict[str, str] | None = None, timeout: float = 90.0):
     """Yield a running :class:`LabServer` serving copies of ``notebooks``; always stop it."""
@@ -124,7 +129,7 @@ def lab_server(tmp: Path, notebooks: list[Path], env_extra: dict[str, str] | Non
         "JUPYTER_CONFIG_DIR": str(home / "config"), "JUPYTER_RUNTIME_DIR": str(home / "runtime"),
         "JUPYTERLAB_SETTINGS_DIR": str(home / "settings"), "JUPYTERLAB_WORKSPACES_DIR": str(home / "workspaces"),
         "IPYTHONDIR": str(home / "ipython"), "JUPYTER_DATA_DIR": str(home / "data"), "COURSEKIT_FAST": "1",
-        "COURSEKIT_EXERCISES": os.environ.get("COURSEKIT_EXERCISES", "solutions"),
+        "COURSEKIT_EXERCISES": exercise_mode(),
         "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
         "PYTHONPATH": os.pathsep.join([str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])]),
     })
@@ -141,7 +146,9 @@ def lab_server(tmp: Path, notebooks: list[Path], env_extra: dict[str, str] | Non
     port = free_port()
     cmd = [sys.executable, "-m", "jupyterlab", "--no-browser", f"--port={port}", "--ip=127.0.0.1",
            f"--IdentityProvider.token={token}", f"--ServerApp.root_dir={root}", "--ServerApp.port_retries=0",
-           "--LabApp.news_url=", "--LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate"]
+           "--LabApp.news_url=", "--LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate",
+           # window.jupyterapp: LabPage.open() reads the notebook's real kernel state from it (see there)
+           "--LabApp.expose_app_in_browser=True"]
     if os.geteuid() == 0:
         cmd.append("--allow-root")
     log = open(tmp / "lab.log", "wb")  # noqa: SIM115  (closed in finally)
@@ -163,6 +170,25 @@ class RunAllStopped(RuntimeError):
     """Run All ended with cells that never ran (a cell raised, or the kernel died)."""
 
 
+KERNEL_STATE_JS = """() => {
+    const context = window.jupyterapp?.shell?.currentWidget?.sessionContext;
+    const kernel = context?.session?.kernel;
+    return context ? {status: context.kernelDisplayStatus, connection: kernel?.connectionStatus ?? null,
+                      ready: context.isReady, name: kernel?.name ?? null} : null;
+}"""
+"""The open notebook's kernel as JupyterLab's session context sees it (None before the notebook opens)."""
+
+KERNEL_READY_JS = f"""() => {{
+    const state = ({KERNEL_STATE_JS})();
+    return state !== null && state.ready && state.connection === 'connected' && state.status === 'idle';
+}}"""
+
+
+def _log_tail(server: LabServer, chars: int = 3000) -> str:
+    log = server.root.parent / "lab.log"
+    return log.read_text(errors="replace")[-chars:] if log.exists() else "(no server log)"
+
+
 class LabPage:
     """A notebook open in JupyterLab, driven by playwright."""
 
@@ -173,8 +199,23 @@ class LabPage:
         self.page.goto(f"{self.server.url}/lab/tree/{self.name}?token={self.server.token}&reset",
                        timeout=timeout_ms)
         self.page.wait_for_selector(".jp-Notebook .jp-Cell", timeout=timeout_ms)
-        # the kernel is up when the toolbar's status says idle
-        self.page.wait_for_selector(".jp-Notebook-ExecutionIndicator[data-status='idle']", timeout=timeout_ms)
+        # The kernel is up when the notebook's session context says so. The toolbar's execution
+        # indicator is no witness: it reads 'idle' from the moment it is drawn, before the session
+        # has even asked for a kernel, and a Run All issued then (kernel specs not loaded yet on a
+        # busy machine) opens JupyterLab's "Select Kernel" dialog instead of running anything.
+        # A dialog instead (no such kernel, a kernel that failed to start) ends the wait at once.
+        self.page.wait_for_function(f"() => ({KERNEL_READY_JS})() || document.querySelector('.jp-Dialog') !== null",
+                                    timeout=timeout_ms)
+        self.fail_on_dialog("after opening")
+
+    def fail_on_dialog(self, when: str) -> None:
+        """Raise, naming it, if a JupyterLab dialog is open (it would swallow every click)."""
+        dialogs = self.page.locator(".jp-Dialog").all_inner_texts()
+        if dialogs:
+            self.page.screenshot(path=str(self.server.root / f"dialog-{self.name}.png"))
+            raise RuntimeError(f"{self.name}: a JupyterLab dialog is open {when}: {dialogs}; kernel "
+                               f"{self.page.evaluate(KERNEL_STATE_JS)}\n--- jupyter lab log (tail) ---\n"
+                               f"{_log_tail(self.server)}")
 
     def command(self, menu: str, item: str) -> None:
         self.page.locator(".lm-MenuBar-itemLabel", has_text=menu).first.click()
@@ -200,7 +241,8 @@ class LabPage:
             hidden.evaluate("element => element.remove()")
 
     def _run_all(self, deadline: float, timeout_s: float) -> None:
-        for _attempt in range(3):
+        for attempt in range(3):
+            self.fail_on_dialog(f"before Run All (attempt {attempt + 1})")
             self.page.locator(".jp-Notebook").first.click()
             self.command("Run", "Run All Cells")
             started = time.monotonic() + 30
@@ -231,8 +273,7 @@ class LabPage:
         status = self.page.locator(".jp-Notebook-ExecutionIndicator").first.get_attribute("data-status")
         errors = self.page.locator(".jp-OutputArea-output[data-mime-type='application/vnd.jupyter.stderr']")
         dialogs = self.page.locator(".jp-Dialog-content").all_inner_texts()
-        log = self.server.root.parent / "lab.log"
-        tail = log.read_text(errors="replace")[-3000:] if log.exists() else "(no server log)"
+        tail = _log_tail(self.server)
         memory = psutil.virtual_memory()
         return (f"{self.name}: Run All stopped before every cell ran; prompts {prompts}; kernel status "
                 f"{status!r}; dialogs {dialogs}; stderr outputs {errors.all_inner_texts()[-3:]}; memory "

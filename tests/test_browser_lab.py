@@ -68,9 +68,7 @@ def page(browser, lab):
 def run_notebook(page, lab, name):
     """Run All in JupyterLab; the saved notebook passes what tests/test_notebooks.py checks of an
     nbclient run (which then skips this chapter's solutions pass, see tests/conftest.py)."""
-    import os
-
-    from lab_session import LabPage, error_outputs, not_run
+    from lab_session import LabPage, error_outputs, exercise_mode, not_run
     from notebook_checks import banner_problems
 
     nb_page = LabPage(page, lab, name)
@@ -79,7 +77,7 @@ def run_notebook(page, lab, name):
     nb = nb_page.save_and_read()
     assert not error_outputs(nb), f"{name}: error outputs {error_outputs(nb)}"
     assert not not_run(nb), f"{name}: cells never ran: {not_run(nb)}"
-    mode = os.environ.get("COURSEKIT_EXERCISES", "exercises")
+    mode = exercise_mode()  # what the lab's kernels ran
     if mode in ("solutions", "exercises") and name.split("_", 1)[0].isdigit():  # a course chapter
         problems = banner_problems(nb, int(name.split("_", 1)[0]), mode)
         assert not problems, f"{name} ({mode}): {problems}"
@@ -355,3 +353,31 @@ def test_run_all_that_stops_early_fails_at_once_and_says_why(browser, tmp_path, 
             page.close()
     assert waited < 120, f"Run All's stop was noticed only after {waited:.0f} s"
     assert says in str(stopped.value).lower() or says in str(stopped.value), str(stopped.value)[:2000]
+
+
+def test_open_waits_for_the_real_kernel_and_names_a_dialog_at_once(browser, tmp_path):
+    """``LabPage.open`` returns only once the notebook's kernel is connected and idle (the toolbar's
+    indicator reads 'idle' before any kernel exists: a Run All issued then opened "Select Kernel" in CI),
+    and a dialog in its place (here: the notebook asks for a kernel this server lacks) fails at once."""
+    import nbformat
+    from lab_session import KERNEL_STATE_JS, LabPage, lab_server
+
+    good, bad = tmp_path / "good.ipynb", tmp_path / "bad.ipynb"
+    for path, kernel in ((good, "python3"), (bad, "no-such-kernel")):
+        nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell("print('hi')")])
+        nb.metadata["kernelspec"] = {"name": kernel, "display_name": kernel, "language": "python"}
+        nbformat.write(nb, path)
+    with lab_server(tmp_path / "srv", [good, bad]) as server:
+        page = browser.new_page(viewport={"width": 1280, "height": 1000})
+        try:
+            LabPage(page, server, good.name).open()
+            state = page.evaluate(KERNEL_STATE_JS)
+            assert state["connection"] == "connected" and state["status"] == "idle", state
+            t0 = time.monotonic()
+            with pytest.raises(RuntimeError, match="dialog is open after opening") as opened:
+                LabPage(page, server, bad.name).open()
+            waited = time.monotonic() - t0
+        finally:
+            page.close()
+    assert "Select Kernel" in str(opened.value), str(opened.value)[:1000]
+    assert waited < 60, f"the dialog was noticed only after {waited:.0f} s"
