@@ -9,10 +9,12 @@ the L1 loss alone; ACT's own ablation, Sec. 5) on the same protocol.
     .venv/bin/python -m benchmarks.bench_act_chunks --steps 7000 --train-seeds 0 1 2 --threads 1
     .venv/bin/python -m benchmarks.bench_act_chunks --steps 20 --train-seeds 0 --episodes 2 --variants "ACT k=10" --no-record  # smoke
     .venv/bin/python -m benchmarks.bench_act_chunks --steps 7000 --train-seeds 0 --threads 1 --variants "ACT k=100 from the top camera"
+    .venv/bin/python -m benchmarks.bench_act_chunks --task insertion --steps 7000 --train-seeds 0 1 2 --threads 1
 
 Every variant (:data:`VARIANTS`) is ACT with the "cpu" recipe on the same 50 scripted
-transfer-cube demonstrations (seeds 0-49), the same step budget (the shipped ACT transfer-cube
-checkpoint trained 7173 steps in all), each training seed of ``--train-seeds``; evaluated on the
+demonstrations of ``--task`` (seeds 0-49; the transfer cube unless told, the insertion is the second
+task of the ACT paper's sweep), the same step budget (the shipped ACT transfer-cube checkpoint trained
+7173 steps in all), each training seed of ``--train-seeds``; evaluated on the
 protocol seeds (100000-100199) with two executors: open-loop chunks (Ta = k: the k actions of a
 chunk executed before the next observation, the setting of the paper's k sweep) and temporal
 ensembling (m = 0.01, ACT's own executor). At k = 1 the two are the same single-step policy, so
@@ -42,7 +44,9 @@ from coursekit.atomic import atomic_write_text
 
 SECTION = "Chunk ablation (arm pair)"
 COMMAND = ".venv/bin/python -m benchmarks.bench_act_chunks"
-TASK, N_DEMOS = "transfer_cube", 50
+TASKS = ("transfer_cube", "insertion")
+"""The arm pair's tasks (``coursekit.tasks`` names); the first is the default, and its runs and rows carry no task name."""
+N_DEMOS = 50
 VARIANTS = {  # name -> ACT config fields
     "ACT k=1": {"chunk_size": 1},
     "ACT k=10": {"chunk_size": 10},
@@ -63,22 +67,32 @@ EPISODE_STEPS: int | None = None
 CACHE = cache_dir("act_chunks")
 
 
-def demonstrations(out: Path):
-    """The 50 scripted transfer-cube demonstrations (seeds 0-49), collected once into ``out``."""
+def demonstrations(out: Path, task: str = TASKS[0]):
+    """The 50 scripted demonstrations of ``task`` (seeds 0-49), collected once into ``out``."""
     from coursekit.data import EpisodeDataset
     from coursekit.tasks import get_task
 
-    path = out / f"aloha_{TASK}_{N_DEMOS}ep_seed0.npz"
+    path = out / f"aloha_{task}_{N_DEMOS}ep_seed0.npz"
     if path.exists():
         return EpisodeDataset.load(path)
-    ds = get_task(TASK).collect(N_DEMOS, 0, progress=False)
+    ds = get_task(task).collect(N_DEMOS, 0, progress=False)
     ds.save(path)
     return ds
 
 
-def run_dir(out: Path, name: str, ts: int, steps: int) -> Path:
-    """The cache folder of variant ``name``, training seed ``ts``, ``steps`` optimiser steps."""
-    return out / f"{run_slug(name)}_seed{ts}_s{steps}"
+def run_dir(out: Path, name: str, ts: int, steps: int, task: str = TASKS[0]) -> Path:
+    """The cache folder of variant ``name`` on ``task``, training seed ``ts``, ``steps`` optimiser steps.
+
+    The transfer cube's folders carry no task (they were named before the insertion ran, and the
+    ledger keeps them under those names): ``act-k-10_seed0_s7000`` vs ``act-k-10_insertion_seed0_s7000``.
+    """
+    on = "" if task == TASKS[0] else f"_{task}"
+    return out / f"{run_slug(name)}{on}_seed{ts}_s{steps}"
+
+
+def label(name: str, task: str) -> str:
+    """The variant's name in its rows: "ACT k=10", or "ACT k=10 on insertion" on the second task."""
+    return name if task == TASKS[0] else f"{name} on {task}"
 
 
 def train_or_load(name: str, ts: int, args: argparse.Namespace, dataset):
@@ -92,7 +106,8 @@ def train_or_load(name: str, ts: int, args: argparse.Namespace, dataset):
 
         fields["vision"] = VisionEncoderConfig.preset(fields["vision"])
     build = lambda: make_policy("act", dataset, recipe="cpu", seed=ts, **fields)  # noqa: E731
-    return load_or_train(run_dir(args.out, name, ts, args.steps), build, args.steps, ts, args.threads, dataset.meta)
+    run = run_dir(args.out, name, ts, args.steps, args.task)
+    return load_or_train(run, build, args.steps, ts, args.threads, dataset.meta)
 
 
 def executor_factory(executor: str, k: int):
@@ -104,7 +119,7 @@ def executor_factory(executor: str, k: int):
     return lambda predict_chunk: TemporalEnsemble(predict_chunk, 1, ensemble_decay=0.01)
 
 
-def evaluate_run(load, run: Path, executor: str, seeds: list[int], k: int, dataset) -> dict:
+def evaluate_run(load, run: Path, executor: str, seeds: list[int], k: int, dataset, task: str = TASKS[0]) -> dict:
     """Strict success and highest stage per seed of ``run``, in cached blocks of ``BLOCK`` seeds.
 
     ``load()`` gives the trained policy (chunk size ``k``) and ``dataset()`` its demonstrations; either
@@ -118,7 +133,7 @@ def evaluate_run(load, run: Path, executor: str, seeds: list[int], k: int, datas
         block = seeds[i:i + BLOCK]
         path = evaluation_file(run, f"eval_{tag}_{block[0]}_{len(block)}.json")
         if not path.exists():
-            r = evaluate_aloha(load(), TASK, seeds=block, executor_factory=executor_factory(executor, k),
+            r = evaluate_aloha(load(), task, seeds=block, executor_factory=executor_factory(executor, k),
                                dataset_meta=dataset().meta, progress=False, max_steps=EPISODE_STEPS)
             part = {"seed": block, "strict": (r.states[:, -1, 1] > 0.5).tolist(),
                     "stage": r.states[:, :, 0].max(axis=1).astype(int).tolist(), "seconds": r.seconds}
@@ -142,12 +157,13 @@ def summarise(name: str, executor: str, per_seed: dict[int, dict], args: argpars
     seeds = sorted(per_seed)
     note = (f"training seeds {seeds} (per seed: {', '.join(f'{100 * r:.1f} %' for r in rates)}; t-interval over "
             f"seeds [{100 * tlo:.1f}, {100 * thi:.1f}] %); {len(strict) // len(seeds)} protocol seeds each; stages 1-4 "
-            f"reached: {', '.join(f'{np.mean(stages >= s):.2f}' for s in range(1, 5))}; {N_DEMOS} scripted demos, "
+            f"reached: {', '.join(f'{np.mean(stages >= s):.2f}' for s in range(1, 5))}; {N_DEMOS} scripted {args.task} demos, "
             f"recipe cpu, {args.steps} steps, {args.threads} thread(s)")
-    print(f"{name}, {executor}: {100 * strict.mean():.1f} % [{100 * lo:.1f}, {100 * hi:.1f}] (n={strict.size}); {note}")
-    cmd = (f"{COMMAND} --steps {args.steps} --train-seeds {' '.join(map(str, seeds))} --threads {args.threads} "
+    print(f"{label(name, args.task)}, {executor}: {100 * strict.mean():.1f} % [{100 * lo:.1f}, {100 * hi:.1f}] (n={strict.size}); {note}")
+    task = "" if args.task == TASKS[0] else f" --task {args.task}"
+    cmd = (f"{COMMAND}{task} --steps {args.steps} --train-seeds {' '.join(map(str, seeds))} --threads {args.threads} "
            f"--variants '{name}'")
-    record(SECTION, f"{name}, {executor}: strict success", round(100 * float(strict.mean()), 1), "%", cmd,
+    record(SECTION, f"{label(name, args.task)}, {executor}: strict success", round(100 * float(strict.mean()), 1), "%", cmd,
            interval=[round(100 * lo, 1), round(100 * hi, 1)], n=int(strict.size), note=note,
            seeds=f"{min(e['seed'][0] for e in per_seed.values())}-{max(e['seed'][-1] for e in per_seed.values())}")
 
@@ -157,6 +173,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--steps", type=int, default=7000, help="optimiser steps per run (step-matched)")
     parser.add_argument("--train-seeds", type=int, nargs="+", default=[0, 1, 2], help="training seeds per variant")
     parser.add_argument("--variants", nargs="+", default=SWEEP, help=f"of {list(VARIANTS)} (default: the first {len(SWEEP)})")
+    parser.add_argument("--task", choices=TASKS, default=TASKS[0], help="the arm pair's task (default: %(default)s)")
     parser.add_argument("--out", type=Path, default=CACHE, help="runs and evaluations (resumable)")
     add_protocol_args(parser)
     args = parser.parse_args(argv)
@@ -168,16 +185,16 @@ def main(argv: list[str] | None = None) -> None:
     from benchmarks.results import record as write
 
     record = (lambda *a, **k: None) if args.no_record else write
-    dataset = functools.cache(lambda: demonstrations(args.out))  # collected only if something is trained
+    dataset = functools.cache(lambda: demonstrations(args.out, args.task))  # collected only if something is trained
     for name in args.variants:
         k = VARIANTS[name]["chunk_size"]
         executors = EXECUTORS[:1] if k == 1 else EXECUTORS
         per_seed: dict[str, dict[int, dict]] = {executor: {} for executor in executors}
         for ts in args.train_seeds:  # each run evaluated once trained: a cut sweep keeps what it finished
             load = functools.cache(lambda ts=ts: train_or_load(name, ts, args, dataset()))
-            run = run_dir(args.out, name, ts, args.steps)
+            run = run_dir(args.out, name, ts, args.steps, args.task)
             for executor in executors:
-                per_seed[executor][ts] = evaluate_run(load, run, executor, seeds, k, dataset)
+                per_seed[executor][ts] = evaluate_run(load, run, executor, seeds, k, dataset, args.task)
         for executor in executors:
             summarise(name, executor, per_seed[executor], args, record)
 

@@ -1,7 +1,8 @@
-"""The long benchmarks still to run, as two queues, one per core: run them in pieces, on any day, until they are done.
+"""The long benchmarks still to run, as queues, one per core: run them in pieces, on any day, until they are done.
 
     .venv/bin/python -m benchmarks.long_runs a          # core 1: the three heads on person-like demonstrations
     .venv/bin/python -m benchmarks.long_runs b          # core 2: ACT's k sweep, then ACT from the camera
+    .venv/bin/python -m benchmarks.long_runs c          # either core: the k sweep again on insertion
     .venv/bin/python -m benchmarks.long_runs a --list   # the queue, one command per line
 
 Every step is a command of a resumable benchmark (``benchmarks/resumable.py``): a finished run is
@@ -21,7 +22,8 @@ RTC in its regime for both heads and the Tp = 32 flow head, stage 1 of the pixel
 without crops, the two-stage pixel policy (shipped) and the end-to-end one (``PIXEL_STEPS_END_TO_END``
 says how its budget was set; its checkpoint is not kept, so it left the queue rather than be trained
 again on a new machine). Queue a and the k sweep of queue b are kept in the ledger: on any machine
-they record their rows without training.
+they record their rows without training. Queue c (issue 24's "and insertion if the budget allows";
+about four CPU-hours, like b's sweep) is the one still training.
 """
 
 from __future__ import annotations
@@ -50,8 +52,20 @@ def ablation(variants: list[str], steps: int, seeds, data: Path) -> list[str]:
             "--variants", *variants, "--threads", "1", "--data", str(data), "--name-budget"]
 
 
-def act_variant(name: str) -> list[str]:
-    return ["bench_act_chunks", "--steps", "7000", "--threads", "1", "--variants", name]
+def act_variant(name: str, task: str = "transfer_cube") -> list[str]:
+    on = [] if task == "transfer_cube" else ["--task", task]
+    return ["bench_act_chunks", *on, "--steps", "7000", "--threads", "1", "--variants", name]
+
+
+def act_sweep(task: str) -> list[tuple[str, list[str]]]:
+    """ACT's k sweep and no-CVAE run on ``task``: each run trained and kept, then each variant's rows."""
+    from benchmarks.bench_act_chunks import SWEEP
+
+    steps: list[tuple[str, list[str]]] = []
+    for variant in SWEEP:  # variant by variant, so that a cut queue leaves whole rows behind
+        for s in SEEDS:
+            steps += [("train", [*act_variant(variant, task), "--train-seeds", str(s)]), ("keep", ["ledger"])]
+    return steps + [("record", [*act_variant(v, task), "--train-seeds", *map(str, SEEDS)]) for v in SWEEP]
 
 
 def queue_a() -> list[tuple[str, list[str]]]:
@@ -66,19 +80,17 @@ def queue_a() -> list[tuple[str, list[str]]]:
 
 
 def queue_b() -> list[tuple[str, list[str]]]:
-    """Issues 24 (item 3) and 26: ACT's k sweep and no-CVAE run, then ACT from the camera."""
-    from benchmarks.bench_act_chunks import SWEEP
-
-    steps: list[tuple[str, list[str]]] = []
-    for variant in SWEEP:  # variant by variant, so that a cut queue leaves whole rows behind
-        for s in SEEDS:
-            steps += [("train", [*act_variant(variant), "--train-seeds", str(s)]), ("keep", ["ledger"])]
-    steps += [("record", [*act_variant(v), "--train-seeds", *map(str, SEEDS)]) for v in SWEEP]
-    steps += [("rows", [*act_variant("ACT k=100 from the top camera"), "--train-seeds", "0"])]  # 26's stretch
-    return steps
+    """Issues 24 (item 3) and 26: ACT's k sweep and no-CVAE run on the transfer cube, then ACT from the camera."""
+    return [*act_sweep("transfer_cube"),
+            ("rows", [*act_variant("ACT k=100 from the top camera"), "--train-seeds", "0"])]  # 26's stretch
 
 
-QUEUES = {"a": queue_a, "b": queue_b}
+def queue_c() -> list[tuple[str, list[str]]]:
+    """Issue 24 (item 3, "and insertion if the budget allows"): the same sweep on the insertion."""
+    return act_sweep("insertion")
+
+
+QUEUES = {"a": queue_a, "b": queue_b, "c": queue_c}
 SKIPPED = {"data": lambda step: f"{step[1]} exists",
            "record": lambda step: f"{step[0]}: recording skipped (--no-record)"}
 """Why a step of each kind that can be skipped was, for the log."""
@@ -103,7 +115,7 @@ def command(kind: str, args: list[str], no_record: bool) -> list[str] | None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("queue", choices=sorted(QUEUES), help="a: person-like PushT runs; b: ACT's k sweep, the camera, pixels")
+    parser.add_argument("queue", choices=sorted(QUEUES), help="a: person-like PushT runs; b: ACT's k sweep, then the camera; c: the sweep on insertion")
     parser.add_argument("--list", action="store_true", help="print the queue's commands and stop")
     parser.add_argument("--no-record", action="store_true", help="write no rows (record steps are skipped)")
     args = parser.parse_args(argv)

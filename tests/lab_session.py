@@ -285,6 +285,7 @@ class LabPage:
         """Save the notebook from the browser and return the executed notebook JSON from disk."""
         path = self.server.root / self.name
         before = path.stat().st_mtime_ns
+        self.fail_on_dialog("before saving")
         self.page.locator(".jp-Notebook").first.click()
         self.page.keyboard.press("Control+s")
         deadline = time.monotonic() + 60

@@ -50,7 +50,12 @@ def test_every_train_step_is_followed_by_keeping_its_evaluations():
                 assert after == "keep"
 
 
-def test_the_k_sweep_runs_variant_by_variant_over_all_seeds():
-    trains = [step for kind, step in lr.queue_b() if kind == "train"]
+@pytest.mark.parametrize(("queue", "task"), [("b", None), ("c", "insertion")])
+def test_the_k_sweep_runs_variant_by_variant_over_all_seeds(queue, task):
+    steps = lr.QUEUES[queue]()
+    trains = [step for kind, step in steps if kind == "train"]
     order = [(step[step.index("--variants") + 1], int(step[-1])) for step in trains]
     assert order == [(v, s) for v in SWEEP for s in lr.SEEDS]
+    for kind, step in steps:  # every step of the queue trains, keeps or records runs on its task
+        if step[0] == "bench_act_chunks":
+            assert (step[step.index("--task") + 1] if "--task" in step else None) == task, step
