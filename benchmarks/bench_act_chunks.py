@@ -157,8 +157,8 @@ def summarise(name: str, executor: str, per_seed: dict[int, dict], args: argpars
     seeds = sorted(per_seed)
     note = (f"training seeds {seeds} (per seed: {', '.join(f'{100 * r:.1f} %' for r in rates)}; t-interval over "
             f"seeds [{100 * tlo:.1f}, {100 * thi:.1f}] %); {len(strict) // len(seeds)} protocol seeds each; stages 1-4 "
-            f"reached: {', '.join(f'{np.mean(stages >= s):.2f}' for s in range(1, 5))}; {N_DEMOS} scripted {args.task} demos, "
-            f"recipe cpu, {args.steps} steps, {args.threads} thread(s)")
+            f"reached: {', '.join(f'{np.mean(stages >= s):.2f}' for s in range(1, 5))}; {N_DEMOS} scripted "
+            f"{args.task.replace('_', ' ')} demos, recipe cpu, {args.steps} steps, {args.threads} thread(s)")
     print(f"{label(name, args.task)}, {executor}: {100 * strict.mean():.1f} % [{100 * lo:.1f}, {100 * hi:.1f}] (n={strict.size}); {note}")
     task = "" if args.task == TASKS[0] else f" --task {args.task}"
     cmd = (f"{COMMAND}{task} --steps {args.steps} --train-seeds {' '.join(map(str, seeds))} --threads {args.threads} "

@@ -21,9 +21,9 @@ Done and recorded (their rows name their commands): the budget curve (2000, 6000
 RTC in its regime for both heads and the Tp = 32 flow head, stage 1 of the pixel route with and
 without crops, the two-stage pixel policy (shipped) and the end-to-end one (``PIXEL_STEPS_END_TO_END``
 says how its budget was set; its checkpoint is not kept, so it left the queue rather than be trained
-again on a new machine). Queue a and the k sweep of queue b are kept in the ledger: on any machine
-they record their rows without training. Queue c (issue 24's "and insertion if the budget allows";
-about four CPU-hours, like b's sweep) is the one still training.
+again on a new machine). Queues a and b are kept in the ledger (ACT from the camera on training
+seed 0 too): on any machine they record their rows without training. Queue c (issue 24's "and
+insertion if the budget allows"; about four CPU-hours, like b's sweep) is the one still training.
 """
 
 from __future__ import annotations

@@ -46,7 +46,7 @@ def test_a_tiny_sweep_records_wilson_rows_and_reuses_its_cache(tmp_path, monkeyp
         assert unit == "%" and k["n"] == 1 and k["seeds"] == "100000-100000"
         assert k["interval"] == [round(100 * x, 1) for x in wilson_interval(successes, k["n"])]
         assert "--variants 'ACT k=10'" in cmd and "--steps 2" in cmd
-        assert ("--task insertion" in cmd) == (task == "insertion") and task in k["note"]
+        assert ("--task insertion" in cmd) == (task == "insertion") and task.replace("_", " ") in k["note"]
     evals = sorted(bac.run_dir(tmp_path, "ACT k=10", 0, 2, task).glob("eval_*.json"))
     assert [p.name for p in evals] == ["eval_open_100000_1.json", "eval_te_100000_1.json"]
     stamps = [p.stat().st_mtime_ns for p in evals]
