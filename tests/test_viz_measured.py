@@ -71,6 +71,26 @@ def test_chunk_sweep_in_fractions_with_the_no_cvae_point_apart():
     assert no_vae["open-loop chunks (Ta=k)"] == pytest.approx((100, 0.85, 0.82, 0.876, 600))
 
 
+def test_chunk_sweep_keeps_each_task_apart_and_skips_the_camera_run():
+    on_insertion = {
+        "i": row("Chunk ablation (arm pair)", "ACT k=10 on insertion, open-loop chunks (Ta=k): strict success", 4.8,
+                 [3.4, 6.9], 600, "%"),
+        "j": row("Chunk ablation (arm pair)", "ACT k=100 without CVAE on insertion, open-loop chunks (Ta=k): strict "
+                 "success", 50.0, [46.0, 54.0], 600, "%"),
+        "c": row("Chunk ablation (arm pair)", "ACT k=100 from the top camera, open-loop chunks (Ta=k): strict success",
+                 94.5, [90.4, 96.9], 200, "%"),
+    }
+    rows = {**ROWS, **on_insertion}
+    rows["i"]["note"] = "training seeds [0, 1, 2] (per seed: 4.0 %, 6.0 %, 4.5 %; ...)"
+    assert chunk_sweep(rows) == chunk_sweep(ROWS)  # the transfer cube's, as before
+    sweep, no_vae = chunk_sweep(rows, "insertion")
+    assert sweep == {"open-loop chunks (Ta=k)": [pytest.approx((10, 0.048, 0.034, 0.069, 600))]}
+    assert no_vae == {"open-loop chunks (Ta=k)": pytest.approx((100, 0.50, 0.46, 0.54, 600))}
+    assert chunk_sweep_seeds(rows, "insertion") == {
+        ("open-loop chunks (Ta=k)", False): [(10, pytest.approx([0.04, 0.06, 0.045]))]}
+    assert chunk_sweep(rows, "no_such_task") == ({}, {})
+
+
 def test_chunk_sweep_seeds_reads_each_training_seed_from_the_note_as_it_is_written():
     rows = {**ROWS}
     rows["e"] = {**ROWS["e"], "note": "training seeds [0, 1, 2] (per seed: 40.0 %, 16.5 %, 16.5 %; t-interval over "

@@ -10,8 +10,8 @@ readers return nothing and the figures say where the rows come from.
     budget_curve(rows)        variant -> [(steps, value, lo, hi, n)]   (bench_chunk_ablation)
     by_data_set(rows, steps)  variant -> [(data set, value, lo, hi, n)]: the heads step for step on each data set
     leads_by_data_set(rows, steps)  "minus <head>, <starts>" -> [(data set, DP's paired lead, lo, hi, n)]
-    chunk_sweep(rows)         executor -> [(k, value, lo, hi, n)], and the no-CVAE rows (bench_act_chunks)
-    chunk_sweep_seeds(rows)   (executor, without CVAE?) -> [(k, each training seed's value)]: the spread a pooled interval hides
+    chunk_sweep(rows, task)   executor -> [(k, value, lo, hi, n)], and the no-CVAE rows (bench_act_chunks)
+    chunk_sweep_seeds(rows, task)  (executor, without CVAE?) -> [(k, each training seed's value)]: the spread a pooled interval hides
     side_by_side(rows)        task -> [(head, value, lo, hi, n)]: the shipped checkpoints (chapter 9)
     side_by_side(rows, PIXEL_ROUTES)  the same for chapter 12: the pixel routes beside the keypoint policy
     plot_points(ax, pts, ...) one series with its interval bars
@@ -36,7 +36,15 @@ DATA_SETS = ("scripted planner", "person-like")
 _PER_SEED = re.compile(r"per seed: (?P<values>-?[\d.]+(?: %)?(?:, -?[\d.]+(?: %)?)*)")
 _LEAD = re.compile(r"^DP DDIM-10 minus (?P<other>.+?), (?P<seeds>\d+) training seed\(s\), (?P<steps>\d+) steps"
                    r"(?P<person>, person-like demonstrations)?, (?P<starts>two-way|other) starts$")
-_CHUNK = re.compile(r"^ACT k=(?P<k>\d+)(?P<novae> without CVAE)?, (?P<executor>.+): strict success$")
+_CHUNK = re.compile(r"^ACT k=(?P<k>\d+)(?P<novae> without CVAE)?(?: on (?P<task>[a-z_]+))?, (?P<executor>.+): strict success$")
+ARM_TASKS = ("transfer_cube", "insertion")
+"""The arm pair's tasks of the k sweep; rows on the first carry no task name ("ACT k=10, ..."), the others " on <task>"."""
+
+
+def _chunk_row(row: dict[str, Any], task: str) -> re.Match | None:
+    """The name's parts when ``row`` is a k-sweep row on ``task``, else None."""
+    m = _CHUNK.match(row["name"]) if row["section"] == "Chunk ablation (arm pair)" else None
+    return m if m and (m["task"] or ARM_TASKS[0]) == task else None
 
 
 def load_rows(section: str | None = None, path: str | Path = RESULTS) -> dict[str, dict[str, Any]]:
@@ -82,12 +90,12 @@ def by_data_set(rows: dict[str, dict[str, Any]], steps: int = 6000) -> dict[str,
     return {v: sorted(p) for v, p in sorted(out.items())}
 
 
-def chunk_sweep(rows: dict[str, dict[str, Any]]) -> tuple[dict[str, list[Point]], dict[str, Point]]:
-    """ACT's k sweep on the transfer cube as fractions: ({executor: [(k, ...)]}, {executor: no-CVAE point at k})."""
+def chunk_sweep(rows: dict[str, dict[str, Any]], task: str = ARM_TASKS[0]) -> tuple[dict[str, list[Point]], dict[str, Point]]:
+    """ACT's k sweep on ``task`` as fractions: ({executor: [(k, ...)]}, {executor: no-CVAE point at k})."""
     sweep: dict[str, list[Point]] = {}
     no_vae: dict[str, Point] = {}
     for row in rows.values():
-        m = _CHUNK.match(row["name"]) if row["section"] == "Chunk ablation (arm pair)" else None
+        m = _chunk_row(row, task)
         if m:
             point = _point(int(m["k"]), row, 0.01)  # stored in %
             if m["novae"]:
@@ -119,8 +127,9 @@ def per_seed(row: dict[str, Any], scale: float = 1.0) -> list[float]:
     return [float(v.rstrip(" %")) * scale for v in m["values"].split(", ")] if m else []
 
 
-def chunk_sweep_seeds(rows: dict[str, dict[str, Any]]) -> dict[tuple[str, bool], list[tuple[int, list[float]]]]:
-    """(executor, without CVAE?) -> [(k, each training seed's strict success as a fraction)], by k.
+def chunk_sweep_seeds(rows: dict[str, dict[str, Any]],
+                      task: str = ARM_TASKS[0]) -> dict[tuple[str, bool], list[tuple[int, list[float]]]]:
+    """(executor, without CVAE?) -> [(k, each training seed's strict success on ``task`` as a fraction)], by k.
 
     The rows of :func:`chunk_sweep` pool the seeds' episodes into one Wilson interval, which says how
     well the 600 episodes pin the pooled rate, not how much the rate moves from one training seed to
@@ -128,7 +137,7 @@ def chunk_sweep_seeds(rows: dict[str, dict[str, Any]]) -> dict[tuple[str, bool],
     """
     out: dict[tuple[str, bool], list[tuple[int, list[float]]]] = {}
     for row in rows.values():
-        m = _CHUNK.match(row["name"]) if row["section"] == "Chunk ablation (arm pair)" else None
+        m = _chunk_row(row, task)
         values = per_seed(row, 0.01) if m else []  # stored in %
         if values:
             out.setdefault((m["executor"], bool(m["novae"])), []).append((int(m["k"]), values))
