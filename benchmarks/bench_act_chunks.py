@@ -41,10 +41,11 @@ import numpy as np
 from benchmarks.protocol import add_protocol_args, protocol_seeds, t_estimate
 from benchmarks.resumable import cache_dir, evaluation_file, run_slug
 from coursekit.atomic import atomic_write_text
+from coursekit.tasks import INSERTION, TRANSFER_CUBE
 
 SECTION = "Chunk ablation (arm pair)"
 COMMAND = ".venv/bin/python -m benchmarks.bench_act_chunks"
-TASKS = ("transfer_cube", "insertion")
+TASKS = (TRANSFER_CUBE.name, INSERTION.name)
 """The arm pair's tasks (``coursekit.tasks`` names); the first is the default, and its runs and rows carry no task name."""
 N_DEMOS = 50
 VARIANTS = {  # name -> ACT config fields

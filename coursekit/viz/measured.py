@@ -24,6 +24,8 @@ import re
 from pathlib import Path
 from typing import Any
 
+from coursekit.tasks import INSERTION, TRANSFER_CUBE
+
 RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "results.json"
 """The results table of a repository checkout (absent from an installed package)."""
 Point = tuple  # (x, value, lo, hi, n)
@@ -37,7 +39,7 @@ _PER_SEED = re.compile(r"per seed: (?P<values>-?[\d.]+(?: %)?(?:, -?[\d.]+(?: %)
 _LEAD = re.compile(r"^DP DDIM-10 minus (?P<other>.+?), (?P<seeds>\d+) training seed\(s\), (?P<steps>\d+) steps"
                    r"(?P<person>, person-like demonstrations)?, (?P<starts>two-way|other) starts$")
 _CHUNK = re.compile(r"^ACT k=(?P<k>\d+)(?P<novae> without CVAE)?(?: on (?P<task>[a-z_]+))?, (?P<executor>.+): strict success$")
-ARM_TASKS = ("transfer_cube", "insertion")
+ARM_TASKS = (TRANSFER_CUBE.name, INSERTION.name)
 """The arm pair's tasks of the k sweep; rows on the first carry no task name ("ACT k=10, ..."), the others " on <task>"."""
 
 
