@@ -25,8 +25,8 @@ import socket
 import subprocess
 import sys
 import time
-import warnings
 import urllib.request
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
