@@ -96,6 +96,11 @@ def label(name: str, task: str) -> str:
     return name if task == TASKS[0] else f"{name} on {task}"
 
 
+def task_args(task: str) -> list[str]:
+    """The command-line words that choose ``task``: none for the default (so its rows' commands stay as recorded)."""
+    return [] if task == TASKS[0] else ["--task", task]
+
+
 def train_or_load(name: str, ts: int, args: argparse.Namespace, dataset):
     """The variant ``name`` trained with seed ``ts`` for ``--steps`` (resumed or loaded from ``--out``)."""
     from benchmarks.resumable import load_or_train
@@ -161,8 +166,7 @@ def summarise(name: str, executor: str, per_seed: dict[int, dict], args: argpars
             f"reached: {', '.join(f'{np.mean(stages >= s):.2f}' for s in range(1, 5))}; {N_DEMOS} scripted "
             f"{args.task.replace('_', ' ')} demos, recipe cpu, {args.steps} steps, {args.threads} thread(s)")
     print(f"{label(name, args.task)}, {executor}: {100 * strict.mean():.1f} % [{100 * lo:.1f}, {100 * hi:.1f}] (n={strict.size}); {note}")
-    task = "" if args.task == TASKS[0] else f" --task {args.task}"
-    cmd = (f"{COMMAND}{task} --steps {args.steps} --train-seeds {' '.join(map(str, seeds))} --threads {args.threads} "
+    cmd = (f"{' '.join([COMMAND, *task_args(args.task)])} --steps {args.steps} --train-seeds {' '.join(map(str, seeds))} --threads {args.threads} "
            f"--variants '{name}'")
     record(SECTION, f"{label(name, args.task)}, {executor}: strict success", round(100 * float(strict.mean()), 1), "%", cmd,
            interval=[round(100 * lo, 1), round(100 * hi, 1)], n=int(strict.size), note=note,

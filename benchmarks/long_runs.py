@@ -35,6 +35,7 @@ import sys
 import time
 from pathlib import Path
 
+from benchmarks.bench_act_chunks import SWEEP, TASKS, task_args
 from benchmarks.resumable import cache_dir
 
 PERSON = cache_dir("data") / "pusht_400ep_seed0_noise0-5_person.npz"
@@ -52,15 +53,12 @@ def ablation(variants: list[str], steps: int, seeds, data: Path) -> list[str]:
             "--variants", *variants, "--threads", "1", "--data", str(data), "--name-budget"]
 
 
-def act_variant(name: str, task: str = "transfer_cube") -> list[str]:
-    on = [] if task == "transfer_cube" else ["--task", task]
-    return ["bench_act_chunks", *on, "--steps", "7000", "--threads", "1", "--variants", name]
+def act_variant(name: str, task: str = TASKS[0]) -> list[str]:
+    return ["bench_act_chunks", *task_args(task), "--steps", "7000", "--threads", "1", "--variants", name]
 
 
 def act_sweep(task: str) -> list[tuple[str, list[str]]]:
     """ACT's k sweep and no-CVAE run on ``task``: each run trained and kept, then each variant's rows."""
-    from benchmarks.bench_act_chunks import SWEEP
-
     steps: list[tuple[str, list[str]]] = []
     for variant in SWEEP:  # variant by variant, so that a cut queue leaves whole rows behind
         for s in SEEDS:
@@ -81,13 +79,13 @@ def queue_a() -> list[tuple[str, list[str]]]:
 
 def queue_b() -> list[tuple[str, list[str]]]:
     """Issues 24 (item 3) and 26: ACT's k sweep and no-CVAE run on the transfer cube, then ACT from the camera."""
-    return [*act_sweep("transfer_cube"),
+    return [*act_sweep(TASKS[0]),
             ("rows", [*act_variant("ACT k=100 from the top camera"), "--train-seeds", "0"])]  # 26's stretch
 
 
 def queue_c() -> list[tuple[str, list[str]]]:
     """Issue 24 (item 3, "and insertion if the budget allows"): the same sweep on the insertion."""
-    return act_sweep("insertion")
+    return act_sweep(TASKS[1])
 
 
 QUEUES = {"a": queue_a, "b": queue_b, "c": queue_c}
